@@ -1,0 +1,42 @@
+# clothfem: every target bootstraps the machine first (Debian packages + .venv), idempotently.
+SHELL := /bin/bash
+PY := .venv/bin/python
+# One BLAS/OpenMP thread per MPI rank: 2 ranks on 2 cores.
+export OPENBLAS_NUM_THREADS := 1
+export OMP_NUM_THREADS := 1
+MPIRUN := mpirun --allow-run-as-root --oversubscribe -n 2
+OUT ?= results
+
+.PHONY: env test test-serial test-mpi test-slow lint demo demo-rollup bench clean
+
+env: .venv/.clothfem-installed
+
+.venv/.clothfem-installed: pyproject.toml scripts/bootstrap.sh
+	bash scripts/bootstrap.sh
+
+## make test: the default suite, serial then on 2 MPI ranks
+test: env
+	$(MAKE) test-serial
+	$(MAKE) test-mpi
+
+test-serial: env
+	$(PY) -m pytest -q -m "not slow" tests
+
+test-mpi: env
+	$(MPIRUN) $(PY) -m mpi4py -m pytest -q -m "not slow and not serial" -p no:cacheprovider tests
+
+test-slow: env
+	$(PY) -m pytest -q -m slow tests
+
+lint: env
+	.venv/bin/ruff check clothfem tests demos benchmarks
+	.venv/bin/ruff format --check clothfem tests demos benchmarks
+
+## make demo: the main demo
+demo: env demo-rollup
+
+demo-rollup: env
+	$(PY) demos/rollup_strip.py --out $(OUT)/rollup
+
+clean:
+	rm -rf $(OUT) .pytest_cache
