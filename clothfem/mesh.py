@@ -1,0 +1,276 @@
+"""Fabric surface meshes: gmsh generators (run on rank 0) and user ``.msh`` files.
+
+Every generator returns a :class:`SurfaceMesh`: a dolfinx mesh of a 2-D manifold in 3-D,
+its facet tags and the map from boundary names (``"root"``, ``"shoulder"``, ...) to tag
+values. gmsh runs on rank 0 only; dolfinx distributes the mesh over the communicator.
+
+Generated meshes are structured and consistently oriented (cell normals agree across
+facets); :func:`check_orientation` verifies that for user meshes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+import dolfinx
+from dolfinx.io import gmshio
+
+__all__ = ["SurfaceMesh", "strip", "cylinder", "cylinder_panel", "load_msh"]
+
+
+@dataclass(frozen=True)
+class SurfaceMesh:
+    """A fabric surface mesh.
+
+    Attributes
+    ----------
+    mesh: dolfinx mesh, topological dimension 2, geometric dimension 3.
+    facet_tags: boundary-edge tags (may be empty).
+    boundaries: name -> tag value of each named boundary.
+    """
+
+    mesh: dolfinx.mesh.Mesh
+    facet_tags: dolfinx.mesh.MeshTags
+    boundaries: dict[str, int]
+
+    @property
+    def comm(self) -> MPI.Comm:
+        return self.mesh.comm
+
+    def facets(self, name: str) -> np.ndarray:
+        """Local indices of the boundary edges named ``name`` (one-line error if unknown)."""
+        if name not in self.boundaries:
+            known = ", ".join(sorted(self.boundaries)) or "none"
+            raise ValueError(f"unknown boundary tag {name!r}; this mesh has: {known}")
+        return self.facet_tags.indices[self.facet_tags.values == self.boundaries[name]]
+
+
+def _positive_int(name: str, value: int, minimum: int = 1) -> int:
+    if int(value) != value or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _positive(name: str, value: float) -> float:
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a finite number > 0 (metres), got {value!r}")
+    return float(value)
+
+
+def _check_cell(cell: str, order: int) -> None:
+    if cell not in ("quadrilateral", "triangle"):
+        raise ValueError(f"cell must be 'quadrilateral' or 'triangle', got {cell!r}")
+    if order not in (1, 2):
+        raise ValueError(f"order must be 1 or 2, got {order!r}")
+
+
+def _gmsh_to_dolfinx(comm: MPI.Comm, build, *, order: int, cell: str) -> SurfaceMesh:
+    """Run ``build(gmsh)`` on rank 0 (it must define physical groups), mesh, distribute."""
+    import gmsh
+
+    names: dict[str, int] = {}
+    if comm.rank == 0:
+        gmsh.initialize()
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("clothfem")
+        names = build(gmsh)
+        if cell == "quadrilateral":
+            gmsh.option.setNumber("Mesh.RecombineAll", 1)
+            gmsh.option.setNumber("Mesh.RecombinationAlgorithm", 1)
+            gmsh.option.setNumber("Mesh.Algorithm", 6)
+        gmsh.option.setNumber("Mesh.SecondOrderIncomplete", 0)  # 9-node quadrilaterals
+        gmsh.model.mesh.generate(2)
+        gmsh.model.mesh.setOrder(order)
+    names = comm.bcast(names, root=0)
+    try:
+        mesh, _, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=3)
+    finally:
+        if comm.rank == 0:
+            gmsh.finalize()
+    return SurfaceMesh(mesh=mesh, facet_tags=facet_tags, boundaries=names)
+
+
+def strip(
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    *,
+    length: float,
+    width: float,
+    nx: int,
+    ny: int,
+    cell: str = "quadrilateral",
+    order: int = 2,
+) -> SurfaceMesh:
+    """Flat rectangular strip ``[0, length] x [-width/2, width/2]`` in the plane z = 0.
+
+    Boundaries: ``root`` (x = 0), ``tip`` (x = length), ``sides`` (y = +-width/2).
+    ``nx`` x ``ny`` structured cells (quadrilaterals, or each split into two triangles).
+    """
+    length, width = _positive("length", length), _positive("width", width)
+    nx, ny = _positive_int("nx", nx), _positive_int("ny", ny)
+    _check_cell(cell, order)
+
+    def build(gmsh):
+        geo = gmsh.model.geo
+        h = width / 2
+        p = [geo.addPoint(*xy, 0.0) for xy in ((0, -h), (length, -h), (length, h), (0, h))]
+        lines = [geo.addLine(p[i], p[(i + 1) % 4]) for i in range(4)]
+        loop = geo.addCurveLoop(lines)
+        surf = geo.addPlaneSurface([loop])
+        for line, n in zip(lines, (nx, ny, nx, ny), strict=True):
+            geo.mesh.setTransfiniteCurve(line, n + 1)
+        geo.mesh.setTransfiniteSurface(surf, cornerTags=p)
+        if cell == "quadrilateral":
+            geo.mesh.setRecombine(2, surf)
+        geo.synchronize()
+        gmsh.model.addPhysicalGroup(2, [surf], 1)
+        tags = {"root": 1, "tip": 2, "sides": 3}
+        gmsh.model.addPhysicalGroup(1, [lines[3]], tags["root"])
+        gmsh.model.addPhysicalGroup(1, [lines[1]], tags["tip"])
+        gmsh.model.addPhysicalGroup(1, [lines[0], lines[2]], tags["sides"])
+        return tags
+
+    return _gmsh_to_dolfinx(comm, build, order=order, cell=cell)
+
+
+def cylinder(
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    *,
+    radius: float,
+    length: float,
+    n_around: int,
+    n_along: int,
+    cell: str = "quadrilateral",
+    order: int = 2,
+) -> SurfaceMesh:
+    """Open circular tube of axis +x from x = 0 to x = ``length`` (the sleeve).
+
+    Boundaries: ``shoulder`` (the circle at x = 0) and ``cuff`` (x = ``length``).
+    ``n_around`` cells around (a multiple of 4), ``n_along`` along. With ``order=2``
+    the mid-side nodes lie on the exact circle. Cell normals point outwards.
+    """
+    radius, length = _positive("radius", radius), _positive("length", length)
+    n_around = _positive_int("n_around", n_around, 4)
+    n_along = _positive_int("n_along", n_along)
+    if n_around % 4:
+        raise ValueError(f"n_around must be a multiple of 4, got {n_around}")
+    _check_cell(cell, order)
+
+    def build(gmsh):
+        geo = gmsh.model.geo
+        centre = geo.addPoint(0, 0, 0)
+        # Quarter-circle arcs in the plane x = 0, ordered so that extrusion along +x
+        # gives outward cell normals.
+        angles = [0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi]
+        pts = [geo.addPoint(0.0, radius * math.cos(a), radius * math.sin(a)) for a in angles]
+        arcs = [geo.addCircleArc(pts[i], centre, pts[(i + 1) % 4]) for i in range(4)]
+        for arc in arcs:
+            geo.mesh.setTransfiniteCurve(arc, n_around // 4 + 1)
+        out = geo.extrude(
+            [(1, a) for a in arcs], length, 0, 0, numElements=[n_along],
+            recombine=cell == "quadrilateral",
+        )
+        geo.synchronize()
+        surfaces = [tag for dim, tag in out if dim == 2]
+        far = [out[i - 1][1] for i, (dim, _) in enumerate(out) if dim == 2]
+        gmsh.model.addPhysicalGroup(2, surfaces, 1)
+        tags = {"shoulder": 1, "cuff": 2}
+        gmsh.model.addPhysicalGroup(1, arcs, tags["shoulder"])
+        gmsh.model.addPhysicalGroup(1, far, tags["cuff"])
+        return tags
+
+    sm = _gmsh_to_dolfinx(comm, build, order=order, cell=cell)
+    return sm
+
+
+def cylinder_panel(
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    *,
+    radius: float,
+    length: float,
+    angle: float,
+    n_around: int,
+    n_along: int,
+    cell: str = "quadrilateral",
+    order: int = 2,
+) -> SurfaceMesh:
+    """Cylindrical panel (roof) of axis +x: x in [0, length], polar angle in [-angle, angle]
+    measured from +z (so the crest is at y = 0, z = radius).
+
+    Boundaries: ``ends`` (x = 0 and x = length) and ``sides`` (the straight free edges).
+    Used by the Scordelis-Lo roof benchmark.
+    """
+    radius, length = _positive("radius", radius), _positive("length", length)
+    if not (0 < angle < math.pi):
+        raise ValueError(f"angle must be in (0, pi) radians, got {angle!r}")
+    n_around = _positive_int("n_around", n_around)
+    n_along = _positive_int("n_along", n_along)
+    _check_cell(cell, order)
+
+    def build(gmsh):
+        geo = gmsh.model.geo
+        centre = geo.addPoint(0, 0, 0)
+        # From +y side to -y side so that extrusion along +x gives outward (+r) normals.
+        a = geo.addPoint(0.0, radius * math.sin(angle), radius * math.cos(angle))
+        b = geo.addPoint(0.0, -radius * math.sin(angle), radius * math.cos(angle))
+        arc = geo.addCircleArc(a, centre, b)
+        geo.mesh.setTransfiniteCurve(arc, n_around + 1)
+        out = geo.extrude(
+            [(1, arc)], length, 0, 0, numElements=[n_along], recombine=cell == "quadrilateral"
+        )
+        geo.synchronize()
+        far, surf, side_a, side_b = (tag for _, tag in out)
+        gmsh.model.addPhysicalGroup(2, [surf], 1)
+        tags = {"ends": 1, "sides": 2}
+        gmsh.model.addPhysicalGroup(1, [arc, far], tags["ends"])
+        gmsh.model.addPhysicalGroup(1, [side_a, side_b], tags["sides"])
+        return tags
+
+    return _gmsh_to_dolfinx(comm, build, order=order, cell=cell)
+
+
+def load_msh(path: str | Path, comm: MPI.Comm = MPI.COMM_WORLD) -> SurfaceMesh:
+    """Load a gmsh ``.msh`` surface mesh in 3-D with physical groups.
+
+    The surface cells must be in a 2-D physical group; named 1-D physical groups become
+    boundary tags (unnamed ones are called ``"tag<N>"``). One-line errors: missing file,
+    no 2-D physical group, a volume mesh or a mesh in the plane without 3-D coordinates.
+    """
+    import gmsh
+
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"mesh file {str(path)!r} does not exist")
+    names: dict[str, int] = {}
+    error = ""
+    if comm.rank == 0:
+        gmsh.initialize()
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.merge(str(path))  # gmshio.read_from_msh is broken in dolfinx 0.5.2
+        groups = gmsh.model.getPhysicalGroups()
+        dims = {d for d, _ in groups}
+        if 3 in dims or gmsh.model.getDimension() == 3:
+            error = f"mesh file {path.name!r} is a volume mesh; a fabric needs a surface mesh"
+        elif 2 not in dims:
+            error = f"mesh file {path.name!r} has no 2-D physical group (the fabric surface)"
+        for dim, tag in groups:
+            if dim == 1:
+                names[gmsh.model.getPhysicalName(dim, tag) or f"tag{tag}"] = tag
+    error = comm.bcast(error, root=0)
+    names = comm.bcast(names, root=0)
+    if error:
+        if comm.rank == 0:
+            gmsh.finalize()
+        raise ValueError(error)
+    try:
+        mesh, _, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=3)
+    finally:
+        if comm.rank == 0:
+            gmsh.finalize()
+    if mesh.topology.dim != 2:
+        raise ValueError(f"mesh file {path.name!r}: topological dimension must be 2")
+    return SurfaceMesh(mesh=mesh, facet_tags=facet_tags, boundaries=names)

@@ -1,0 +1,30 @@
+"""Fabric shell: pure-UFL physics (kinematics, material) and the discrete model."""
+
+from .conditions import (
+    Clamp,
+    EdgeMoment,
+    EdgeTraction,
+    Gravity,
+    Pin,
+    PointForce,
+    Prescribed,
+    Pressure,
+    Symmetry,
+)
+from .material import FabricMaterial
+from .model import Quadrature, ShellModel
+
+__all__ = [
+    "Clamp",
+    "EdgeMoment",
+    "EdgeTraction",
+    "FabricMaterial",
+    "Gravity",
+    "Pin",
+    "PointForce",
+    "Prescribed",
+    "Pressure",
+    "Quadrature",
+    "ShellModel",
+    "Symmetry",
+]

@@ -1,0 +1,488 @@
+"""The fabric shell model: spaces, nodal directors, compiled forms and the discrete system.
+
+Unknowns per node A (Man & Swan 2007, Eq. 10): the midsurface displacement u_A (3) and two
+rotations theta_A (2) in the nodal fibre basis. The energy is written in UFL in terms of the
+interpolated displacement u and the interpolated *nodal* director d = sum_A N_A d_A(theta_A)
+(Eq. 5), so that rigid motions give zero strain exactly. Residual and Jacobian blocks in
+(u, d) come from ``ufl.derivative`` of that energy; the nodal chain rule of Eq. 10,
+d_A = d_A(theta_A) from Euler's formula, turns them into the (u, theta) system:
+
+    R = P^T R_w,        K = P^T K_w P + G,     P = diag(I, dd_A/dtheta_A),
+    G_A = sum_k (R_d)_Ak d2 d_Ak / dtheta_A^2      (nodal, 2x2)
+
+Element: quadratic Lagrange (9-node quadrilaterals by default) for u and theta, with full
+quadrature for bending and reduced quadrature for membrane and transverse shear (selective
+reduced integration, Hughes 1987), which removes membrane and shear locking; see the README
+for the measurements behind this choice.
+
+Model / state / control: forms are compiled once in the constructor; the load factor ``lam``
+is a ``fem.Constant`` and prescribed values are arrays updated in place.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+import dolfinx
+import dolfinx.fem.petsc as fem_petsc
+from dolfinx import fem, la
+
+from ..mesh import SurfaceMesh
+from . import rotation
+from .conditions import (
+    Clamp,
+    EdgeMoment,
+    EdgeTraction,
+    Gravity,
+    Pin,
+    PointForce,
+    Prescribed,
+    Pressure,
+    Symmetry,
+)
+from .kinematics import lamina_frame, shell_strains
+from .material import FabricMaterial, bending_energy, membrane_energy, shear_energy
+
+__all__ = ["ShellModel", "Quadrature"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Quadrature:
+    """Quadrature degrees: ``full`` for bending, ``reduced`` for membrane and shear.
+
+    The defaults (4 and 2) are 3x3 and 2x2 Gauss points on quadrilaterals.
+    """
+
+    full: int = 4
+    reduced: int = 2
+
+    def __post_init__(self) -> None:
+        for name in ("full", "reduced"):
+            if getattr(self, name) not in range(1, 11):
+                raise ValueError(f"Quadrature {name} must be an integer in 1..10")
+
+
+def _owned_nodes(V: fem.FunctionSpace) -> int:
+    return V.dofmap.index_map.size_local
+
+
+class ShellModel:
+    """A fabric shell on a :class:`~clothfem.mesh.SurfaceMesh` with loads and supports.
+
+    Parameters
+    ----------
+    surface: the fabric mesh (2-D manifold in 3-D).
+    material: the fabric material.
+    thickness: fabric thickness t [m] (> 0).
+    loads, supports: sequences from :mod:`clothfem.shell.conditions`.
+    warp: global vector whose projection on the surface is the warp (material 1) direction.
+    degree: polynomial degree of u and theta (2 recommended).
+    quadrature: see :class:`Quadrature`.
+    """
+
+    def __init__(
+        self,
+        surface: SurfaceMesh,
+        *,
+        material: FabricMaterial,
+        thickness: float,
+        loads: Sequence = (),
+        supports: Sequence = (),
+        warp: Sequence[float] = (1.0, 0.0, 0.0),
+        degree: int = 2,
+        quadrature: Quadrature = Quadrature(),
+    ) -> None:
+        if not (np.isfinite(thickness) and thickness > 0):
+            raise ValueError(f"thickness must be a finite number > 0 (metres), got {thickness!r}")
+        mesh = surface.mesh
+        if mesh.topology.dim != 2 or mesh.geometry.dim != 3:
+            raise ValueError(
+                "mesh must be a surface mesh in 3-D (topological dim 2, geometric dim 3), got "
+                f"dims {mesh.topology.dim}/{mesh.geometry.dim}"
+            )
+        if degree not in (1, 2):
+            raise ValueError(f"degree must be 1 or 2, got {degree!r}")
+        self.surface, self.mesh, self.comm = surface, mesh, mesh.comm
+        self.material, self.thickness, self.degree = material, float(thickness), degree
+        self.loads, self.supports = tuple(loads), tuple(supports)
+        for s in self.supports:
+            if isinstance(s.where, str):
+                surface.facets(s.where)  # one-line error on an unknown tag
+        for load in self.loads:
+            if isinstance(load, EdgeTraction | EdgeMoment):
+                surface.facets(load.where)
+
+        family = "Q" if mesh.topology.cell_type == dolfinx.mesh.CellType.quadrilateral else "P"
+        self.V = fem.VectorFunctionSpace(mesh, (family, degree), dim=3)  # u and d
+        self.Vt = fem.VectorFunctionSpace(mesh, (family, degree), dim=2)  # theta
+        self.n_owned = _owned_nodes(self.V)
+        self.n_local = self.n_owned + self.V.dofmap.index_map.num_ghosts
+        self.x_nodes = self.V.tabulate_dof_coordinates()  # (n_local, 3)
+
+        # Controls
+        self.lam = fem.Constant(mesh, 0.0)
+
+        # State
+        self.u = fem.Function(self.V, name="displacement")
+        self.theta = fem.Function(self.Vt, name="rotation")
+        self.d = fem.Function(self.V, name="director")
+        self.D = fem.Function(self.V, name="reference_director")
+
+        self._build_directors()
+        self._build_supports()
+        self._build_forms(warp, quadrature)
+        self._build_transfer()
+        self.update_director()
+
+    # ------------------------------------------------------------------ geometry
+    def _node_mask(self, where) -> np.ndarray:
+        """Boolean mask over local nodes (owned + ghost), consistent across ranks."""
+        if isinstance(where, str):
+            facets = self.surface.facets(where)
+            nodes = fem.locate_dofs_topological(self.V, 1, facets)
+        else:
+            nodes = np.flatnonzero(np.asarray(where(self.x_nodes.T.copy()), dtype=bool))
+        marker = fem.Function(fem.FunctionSpace(self.mesh, self.V.ufl_element().sub_elements()[0]))
+        marker.x.array[nodes] = 1.0
+        marker.x.scatter_reverse(la.ScatterMode.add)
+        marker.x.scatter_forward()
+        return marker.x.array > 0
+
+    def _build_directors(self) -> None:
+        """Nodal reference directors: averaged unit cell normals at the nodes."""
+        mesh, V = self.mesh, self.V
+        J = ufl.Jacobian(mesh)
+        n = ufl.cross(ufl.as_vector([J[i, 0] for i in range(3)]), ufl.as_vector([J[i, 1] for i in range(3)]))
+        expr = fem.Expression(n / ufl.sqrt(ufl.dot(n, n)), V.element.interpolation_points())
+        n_cells = mesh.topology.index_map(2).size_local
+        cells = np.arange(n_cells, dtype=np.int32)
+        values = expr.eval(cells).reshape(n_cells, -1, 3)
+        dofs = V.dofmap.list.array.reshape(-1, values.shape[1])[:n_cells]
+        acc = np.zeros((self.n_local, 3))
+        np.add.at(acc, dofs.ravel(), values.reshape(-1, 3))
+        self.D.x.array[:] = acc.ravel()
+        self.D.x.scatter_reverse(la.ScatterMode.add)
+        self.D.x.scatter_forward()
+        normals = self.D.x.array.reshape(-1, 3)
+        norms = np.linalg.norm(normals, axis=1)
+        if np.any(norms < 0.5):
+            raise ValueError(
+                "mesh orientation is inconsistent: cell normals cancel at some nodes "
+                "(orient all cells the same way before meshing)"
+            )
+        normals /= norms[:, None]
+        self.D.x.array[:] = normals.ravel()
+        preferred = np.full((self.n_local, 3), np.nan)
+        for s in self.supports:
+            if isinstance(s, Symmetry):
+                preferred[self._node_mask(s.where)] = np.eye(3)[s.axis]
+        has_pref = ~np.isnan(preferred[:, 0])
+        self.basis = rotation.fibre_basis(normals)
+        if has_pref.any():
+            self.basis[has_pref] = rotation.fibre_basis(normals[has_pref], preferred[has_pref])
+
+    # ------------------------------------------------------------------ supports
+    def _build_supports(self) -> None:
+        """Constrained rows of the (u, theta) system and how to compute their values."""
+        nu = 3 * self.n_owned
+        self._bc_rows: list[np.ndarray] = []  # local rows in the (u, theta) layout
+        self._bc_value_fns = []
+        owned = np.zeros(self.n_local, dtype=bool)
+        owned[: self.n_owned] = True
+        for s in self.supports:
+            nodes = np.flatnonzero(self._node_mask(s.where) & owned)
+            if isinstance(s, Clamp | Pin | Symmetry):
+                comps = (s.axis,) if isinstance(s, Symmetry) else (0, 1, 2)
+                rows = (3 * nodes[:, None] + np.array(comps)).ravel()
+                self._add_bc(rows, lambda lam, n=len(rows): np.zeros(n))
+                if isinstance(s, Clamp):
+                    rows = (nu + 2 * nodes[:, None] + np.arange(2)).ravel()
+                    self._add_bc(rows, lambda lam, n=len(rows): np.zeros(n))
+                elif isinstance(s, Symmetry):
+                    self._add_bc(nu + 2 * nodes + 1, lambda lam, n=len(nodes): np.zeros(n))
+            elif isinstance(s, Prescribed):
+                X = self.x_nodes[nodes]
+                comps = np.array(s.components)
+                if s.displacement is not None:
+                    rows = (3 * nodes[:, None] + comps).ravel()
+                    disp = s.displacement
+                    if callable(disp):
+
+                        def fn(lam, X=X, disp=disp, comps=comps):
+                            return np.asarray(disp(X, lam), dtype=float)[:, comps].ravel()
+
+                    else:
+                        vec = np.asarray(disp)[comps]
+
+                        def fn(lam, vec=vec, n=len(nodes)):
+                            return np.tile(lam * vec, n)
+
+                    self._add_bc(rows, fn)
+                if s.rotation is not None:
+                    rows = (nu + 2 * nodes[:, None] + np.arange(2)).ravel()
+                    basis, D0, omega = self.basis[nodes], self.D.x.array.reshape(-1, 3)[nodes], np.array(s.rotation)
+
+                    def fn(lam, basis=basis, D0=D0, omega=omega):
+                        Rm = rotation.rotation_matrix((lam * omega)[None, :])[0]
+                        return rotation.rotation_from_director(basis, D0 @ Rm.T).ravel()
+
+                    self._add_bc(rows, fn)
+
+    def _add_bc(self, rows: np.ndarray, fn) -> None:
+        self._bc_rows.append(np.asarray(rows, dtype=np.int32))
+        self._bc_value_fns.append(fn)
+
+    def bc_rows_and_values(self, lam: float) -> tuple[np.ndarray, np.ndarray]:
+        """Local rows (in the owned (u, theta) layout) and their prescribed values at ``lam``."""
+        if not self._bc_rows:
+            return np.zeros(0, dtype=np.int32), np.zeros(0)
+        rows = np.concatenate(self._bc_rows)
+        values = np.concatenate([fn(lam) for fn in self._bc_value_fns])
+        return rows, values
+
+    # ------------------------------------------------------------------ forms
+    def _build_forms(self, warp, quadrature: Quadrature) -> None:
+        mesh, mat, t = self.mesh, self.material, self.thickness
+        self.Q = fem.Constant(mesh, mat.plane_stress_stiffness())
+        self.kG = fem.Constant(mesh, mat.transverse_shear())
+        self.t = fem.Constant(mesh, t)
+        self.rho = fem.Constant(mesh, float(mat.rho))
+        self.warp = fem.Constant(mesh, np.asarray(warp, dtype=float))
+        frame = lamina_frame(mesh, self.warp)
+        self.frame = frame
+        u, d, D = self.u, self.d, self.D
+        eps, kappa, gamma = shell_strains(u, d, D, frame)
+        self.strains = (eps, kappa, gamma)
+        dx_f = ufl.dx(domain=mesh, metadata={"quadrature_degree": quadrature.full})
+        dx_r = ufl.dx(domain=mesh, metadata={"quadrature_degree": quadrature.reduced})
+        self.dx_full, self.dx_reduced = dx_f, dx_r
+        ds = ufl.Measure("ds", domain=mesh, subdomain_data=self.surface.facet_tags)
+        self._energy_terms = {
+            "membrane": membrane_energy(eps, self.Q, self.t) * dx_r,
+            "bending": bending_energy(kappa, self.Q, self.t) * dx_f,
+            "shear": shear_energy(gamma, self.kG, self.t) * dx_r,
+        }
+        Pi = sum(self._energy_terms.values())
+
+        # external work of dead loads on u, and non-conservative follower loads
+        W_ext = 0
+        follower = 0
+        v = ufl.TestFunction(self.V)
+        self._point_forces: list[PointForce] = []
+        self._moment_work = 0
+        E1 = fem.Function(self.V)
+        E2 = fem.Function(self.V)
+        E1.x.array[:] = self.basis[:, 0].ravel()
+        E2.x.array[:] = self.basis[:, 1].ravel()
+        self._fibre_e = (E1, E2)
+        for load in self.loads:
+            if isinstance(load, Gravity):
+                g = fem.Constant(mesh, np.array(load.acceleration))
+                W_ext += self.lam * self.rho * self.t * ufl.dot(g, u) * dx_f
+            elif isinstance(load, Pressure):
+                p = fem.Constant(mesh, float(load.value))
+                if load.follower:
+                    Fu = ufl.grad(u)
+                    a1, a2 = frame[0] + Fu * frame[0], frame[1] + Fu * frame[1]
+                    follower += -self.lam * p * ufl.dot(ufl.cross(a1, a2), v) * dx_f
+                else:
+                    W_ext += self.lam * p * ufl.dot(frame[2], u) * dx_f
+            elif isinstance(load, EdgeTraction):
+                tr = fem.Constant(mesh, np.array(load.traction))
+                W_ext += self.lam * ufl.dot(tr, u) * ds(self.surface.boundaries[load.where])
+            elif isinstance(load, EdgeMoment):
+                m = fem.Constant(mesh, np.array(load.moment))
+                th = self.theta
+                rotvec = th[0] * E1 + th[1] * E2
+                self._moment_work += self.lam * ufl.dot(m, rotvec) * ds(self.surface.boundaries[load.where])
+            elif isinstance(load, PointForce):
+                self._point_forces.append(load)
+            else:
+                raise ValueError(f"unknown load {load!r}")
+        self._Pi_int = Pi
+        self._W_ext = W_ext
+        R_u = ufl.derivative(Pi - W_ext, u, v) + follower
+        R_d = ufl.derivative(Pi, d, v)
+        w = ufl.TrialFunction(self.V)
+        a = [[ufl.derivative(R, f, w) for f in (u, d)] for R in (R_u, R_d)]
+        self._R_forms = fem.form([R_u, R_d])
+        self._K_forms = fem.form(a)
+        self._energy_form = fem.form(Pi)
+        self._wext_form = fem.form(W_ext) if W_ext != 0 else None
+        if self._moment_work != 0:
+            self._Rm_form = fem.form(ufl.derivative(self._moment_work, self.theta, ufl.TestFunction(self.Vt)))
+            self._wm_form = fem.form(self._moment_work)
+        else:
+            self._Rm_form = self._wm_form = None
+        self._point_rows, self._point_values = self._locate_point_forces()
+
+    def _locate_point_forces(self):
+        rows, values = [], []
+        xo = self.x_nodes[: self.n_owned]
+        for pf in self._point_forces:
+            dist = np.linalg.norm(xo - np.array(pf.point), axis=1) if len(xo) else np.array([np.inf])
+            i = int(np.argmin(dist))
+            best = self.comm.allreduce((float(dist[i]), self.comm.rank), op=MPI.MINLOC)
+            if best[1] == self.comm.rank:
+                rows.append(3 * i + np.arange(3))
+                values.append(np.array(pf.force))
+        if rows:
+            return np.concatenate(rows).astype(np.int32), np.concatenate(values)
+        return np.zeros(0, dtype=np.int32), np.zeros(0)
+
+    # ------------------------------------------------------------------ algebra
+    def _build_transfer(self) -> None:
+        """P: (u, theta) -> (u, d) block layout; the K_w matrix; work vectors."""
+        n = self.n_owned
+        self._Kw = fem_petsc.create_matrix_block(self._K_forms)
+        self._Rw = fem_petsc.create_vector_block(self._R_forms)
+        rw0, rw1 = self._Kw.getOwnershipRange()
+        assert rw1 - rw0 == 6 * n
+        nv = 5 * n
+        v0 = self.comm.scan(nv) - nv
+        self.v_range = (v0, v0 + nv)
+        # CSR of P: rows 0..3n-1 identity on u; rows 3n.. 3 per node x 2 theta columns
+        indptr = np.concatenate([np.arange(3 * n + 1), 3 * n + 2 * np.arange(1, 3 * n + 1)])
+        cols_u = v0 + np.arange(3 * n)
+        cols_t = v0 + 3 * n + (2 * np.repeat(np.arange(n), 3)[:, None] + np.arange(2)).ravel()
+        self._P_indptr = indptr.astype(PETSc.IntType)
+        self._P_indices = np.concatenate([cols_u, cols_t]).astype(PETSc.IntType)
+        self._P_data = np.concatenate([np.ones(3 * n), np.zeros(6 * n)])
+        P = PETSc.Mat().createAIJ(((6 * n, None), (nv, None)), comm=self.comm)
+        P.setPreallocationCSR((self._P_indptr, self._P_indices, self._P_data))
+        P.assemble()
+        self._P = P
+        self._f_ext = P.createVecRight()
+        # G: 2x2 blocks on the theta diagonal
+        g_indptr = np.concatenate([np.zeros(3 * n, dtype=int), 2 * np.arange(2 * n + 1)])
+        g_cols = v0 + 3 * n + (2 * np.repeat(np.arange(n), 2)[:, None] + np.arange(2)).ravel()
+        self._G_indptr = g_indptr.astype(PETSc.IntType)
+        self._G_indices = g_cols.astype(PETSc.IntType)
+        G = PETSc.Mat().createAIJ(((nv, None), (nv, None)), comm=self.comm)
+        G.setPreallocationCSR((self._G_indptr, self._G_indices, np.zeros(4 * n)))
+        G.assemble()
+        self._G = G
+
+    def update_director(self) -> None:
+        """d_A = d_A(theta_A) at every local node (owned and ghost); P from dd_A/dtheta_A."""
+        th = self.theta.x.array.reshape(-1, 2)
+        self.d.x.array[:] = rotation.director(self.basis, th).ravel()
+        T, self._H = rotation.director_derivatives(self.basis[: self.n_owned], th[: self.n_owned])
+        n = self.n_owned
+        self._P_data[3 * n :] = T.reshape(-1)  # rows (node, k), columns a
+        self._P.setValuesCSR(self._P_indptr, self._P_indices, self._P_data)
+        self._P.assemble()
+
+    def create_vector(self) -> PETSc.Vec:
+        """A vector of the (u, theta) system."""
+        return self._P.createVecRight()
+
+    def get_state(self, x: PETSc.Vec) -> None:
+        """Copy the owned state (u, theta) into ``x``."""
+        n = self.n_owned
+        arr = x.getArray()
+        arr[: 3 * n] = self.u.x.array[: 3 * n]
+        arr[3 * n :] = self.theta.x.array[: 2 * n]
+
+    def set_state(self, x: PETSc.Vec) -> None:
+        """Set (u, theta) from ``x``, update ghosts and directors."""
+        n = self.n_owned
+        arr = x.getArray(readonly=True)
+        self.u.x.array[: 3 * n] = arr[: 3 * n]
+        self.theta.x.array[: 2 * n] = arr[3 * n :]
+        self.u.x.scatter_forward()
+        self.theta.x.scatter_forward()
+        self.update_director()
+
+    def set_load_factor(self, lam: float) -> None:
+        """Set the load factor and assemble the parts of the load that do not depend on the
+        state (point forces, edge moments) into the external force vector."""
+        self.lam.value = lam
+        self._f_ext.zeroEntries()
+        n = self.n_owned
+        arr = self._f_ext.getArray()
+        if len(self._point_rows):
+            np.add.at(arr, self._point_rows, lam * self._point_values)
+        if self._Rm_form is not None:
+            b = fem_petsc.assemble_vector(self._Rm_form)
+            b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+            arr[3 * n :] += b.getArray(readonly=True)
+            b.destroy()
+
+    def residual(self, x: PETSc.Vec, f: PETSc.Vec) -> None:
+        """f = R(x) in the (u, theta) layout, without support conditions."""
+        self.set_state(x)
+        Rw = self._Rw
+        with Rw.localForm() as loc:
+            loc.set(0.0)
+        fem_petsc.assemble_vector_block(Rw, self._R_forms, self._K_forms, bcs=[])
+        self._P.multTranspose(Rw, f)
+        f.axpy(-1.0, self._f_ext)
+
+    def jacobian(self, x: PETSc.Vec, K: PETSc.Mat | None = None) -> PETSc.Mat:
+        """K = P^T K_w P + G at ``x`` (created if ``K`` is None), without supports."""
+        self.set_state(x)
+        Rw = self._Rw
+        with Rw.localForm() as loc:
+            loc.set(0.0)
+        fem_petsc.assemble_vector_block(Rw, self._R_forms, self._K_forms, bcs=[])
+        self._Kw.zeroEntries()
+        fem_petsc.assemble_matrix_block(self._Kw, self._K_forms, bcs=[])
+        self._Kw.assemble()
+        if K is None:
+            K = self._Kw.ptap(self._P)
+            K.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
+            K.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        else:
+            self._Kw.ptap(self._P, result=K)
+        # geometric term of the nodal rotation map
+        n = self.n_owned
+        Rd = Rw.getArray(readonly=True)[3 * n : 6 * n].reshape(n, 3)
+        G = np.einsum("nk,nkab->nab", Rd, self._H)
+        self._G.setValuesCSR(self._G_indptr, self._G_indices, G.reshape(-1))
+        self._G.assemble()
+        K.axpy(1.0, self._G, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+        return K
+
+    # ------------------------------------------------------------------ outputs
+    def strain_energy(self) -> float:
+        """Internal strain energy [J] at the current state."""
+        return self.comm.allreduce(fem.assemble_scalar(self._energy_form), op=MPI.SUM)
+
+    def external_work(self) -> float:
+        """Work of the conservative loads [J] at the current state and load factor."""
+        w = 0.0
+        if self._wext_form is not None:
+            w += fem.assemble_scalar(self._wext_form)
+        if self._wm_form is not None:
+            w += fem.assemble_scalar(self._wm_form)
+        u_owned = self.u.x.array[: 3 * self.n_owned]
+        w += float(np.dot(u_owned[self._point_rows], self.lam.value * self._point_values))
+        return self.comm.allreduce(w, op=MPI.SUM)
+
+    def energy_parts(self) -> dict[str, float]:
+        """Membrane, bending and shear strain energy [J]."""
+        out = {}
+        for name, form in self._energy_part_forms().items():
+            out[name] = self.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)
+        return out
+
+    def _energy_part_forms(self):
+        if not hasattr(self, "_part_forms"):
+            self._part_forms = {k: fem.form(v) for k, v in self._energy_terms.items()}
+        return self._part_forms
+
+    def displacement_at(self, point: Sequence[float]) -> np.ndarray:
+        """Displacement of the node nearest to ``point`` (same answer on every rank)."""
+        xo = self.x_nodes[: self.n_owned]
+        dist = np.linalg.norm(xo - np.asarray(point), axis=1) if len(xo) else np.array([np.inf])
+        i = int(np.argmin(dist)) if len(xo) else 0
+        best = self.comm.allreduce((float(dist[i]) if len(xo) else np.inf, self.comm.rank), op=MPI.MINLOC)
+        val = self.u.x.array[3 * i : 3 * i + 3].copy() if best[1] == self.comm.rank else None
+        return self.comm.bcast(val, root=best[1])
