@@ -109,9 +109,34 @@ class NewtonSolver:
         snes.setFunction(self._residual, self.f)
         snes.setJacobian(self._jacobian, self.K)
         snes.setFromOptions()
+        # Accept a residual that has stopped decreasing below floor_rtol * |R0|: the
+        # round-off floor of the SVK strain (|R| ~ eps_mach E t h per node) can lie above
+        # snes_rtol * |R0| for stiff fabrics or small load increments.
+        self.floor_rtol = opts.getReal(prefix + "newton_floor_rtol", 1e-6)
+        snes.setConvergenceTest(self._converged)
         self.snes = snes
         self._norms: list[float] = []
-        snes.setMonitor(lambda s, it, norm: self._norms.append(norm))
+
+    def _converged(self, snes, it, norms) -> int:
+        xnorm, snorm, fnorm = norms
+        self._norms.append(fnorm)
+        rtol, atol, stol, max_it = snes.getTolerances()
+        f0 = self._norms[0]
+        if not np.isfinite(fnorm):
+            return PETSc.SNES.ConvergedReason.DIVERGED_FNORM_NAN
+        if fnorm <= atol:
+            return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_ABS
+        if it == 0:
+            return PETSc.SNES.ConvergedReason.ITERATING
+        if fnorm <= rtol * f0:
+            return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_RELATIVE
+        if snorm <= stol * xnorm:
+            return PETSc.SNES.ConvergedReason.CONVERGED_SNORM_RELATIVE
+        if it >= 2 and fnorm <= self.floor_rtol * f0 and fnorm > 0.5 * self._norms[-2]:
+            return PETSc.SNES.ConvergedReason.CONVERGED_FNORM_RELATIVE
+        if it >= max_it:
+            return PETSc.SNES.ConvergedReason.DIVERGED_MAX_IT
+        return PETSc.SNES.ConvergedReason.ITERATING
 
     def _residual(self, snes, x, f) -> None:
         self.model.residual(x, f)

@@ -1,0 +1,77 @@
+"""Fabric-body contact as a pipeline, in pure NumPy (no FEM imports).
+
+detect candidates -> gaps and normals -> multipliers / forces -> friction -> diagnostics
+
+Sign conventions used throughout:
+
+* ``gap = (x - p) . n`` is the signed distance of a fabric node ``x`` to the body surface
+  (``p`` exact closest point, ``n`` outward unit normal); ``gap < 0`` is penetration.  The paper's
+  Eq. 15 ``g`` equals ``-gap``.
+* ``lam_n >= 0`` (N) is the compressive normal force magnitude; the force on the fabric is
+  ``+lam_n n``, on the body ``-lam_n n``.  Friction forces are forces on the fabric.
+* :func:`joint_torque` (Eq. 28) takes forces **on the body**.
+
+Ellipsoids are plain ``(c, Q, r)`` triples: centre (3,) m, axes as the columns of ``Q`` (local
+coordinates ``y = Q^T (x - c)``), radii (3,) m.
+"""
+
+from clothfem.contact.explicit import FilmResult, film_step
+from clothfem.contact.forces import (
+    ContactDiagnostics,
+    contact_forces,
+    contact_pressure,
+    diagnostics,
+    joint_torque,
+    node_selection,
+    resultant_force,
+)
+from clothfem.contact.friction import (
+    FrictionResult,
+    body_point_velocity,
+    coulomb_return_map,
+    coulomb_slip_update,
+    relative_tangential_velocity,
+    tangential_part,
+)
+from clothfem.contact.geometry import (
+    EllipsoidData,
+    Projection,
+    UnionProjection,
+    candidates,
+    check_ellipsoid,
+    check_points,
+    closest_point_ellipsoid,
+    closest_point_union,
+    gradient_projection,
+    implicit_value,
+    radial_projection,
+)
+
+__all__ = [
+    "ContactDiagnostics",
+    "EllipsoidData",
+    "FilmResult",
+    "FrictionResult",
+    "Projection",
+    "UnionProjection",
+    "body_point_velocity",
+    "candidates",
+    "check_ellipsoid",
+    "check_points",
+    "closest_point_ellipsoid",
+    "closest_point_union",
+    "contact_forces",
+    "contact_pressure",
+    "coulomb_return_map",
+    "coulomb_slip_update",
+    "diagnostics",
+    "film_step",
+    "gradient_projection",
+    "implicit_value",
+    "joint_torque",
+    "node_selection",
+    "radial_projection",
+    "relative_tangential_velocity",
+    "resultant_force",
+    "tangential_part",
+]

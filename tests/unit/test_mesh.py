@@ -1,0 +1,85 @@
+"""Mesh generators and user .msh files."""
+
+import math
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from clothfem import mesh as meshes
+
+COMM = MPI.COMM_WORLD
+
+
+def _global_count(sm, name):
+    return COMM.allreduce(len(sm.facets(name)), op=MPI.SUM)
+
+
+def test_cylinder_is_on_the_circle_with_tags():
+    sm = meshes.cylinder(COMM, radius=0.06, length=0.5, n_around=8, n_along=4)
+    x = sm.mesh.geometry.x
+    assert np.allclose(np.hypot(x[:, 1], x[:, 2]), 0.06, rtol=1e-7)  # incl. mid-side nodes
+    assert sm.mesh.geometry.cmap.degree == 2
+    # each boundary edge is counted by every rank that holds it: at least n_around
+    assert _global_count(sm, "shoulder") >= 8 and _global_count(sm, "cuff") >= 8
+
+
+@pytest.mark.parametrize("cell", ["quadrilateral", "triangle"])
+def test_strip_cells(cell):
+    sm = meshes.strip(COMM, length=2.0, width=1.0, nx=4, ny=2, cell=cell)
+    n = COMM.allreduce(sm.mesh.topology.index_map(2).size_local, op=MPI.SUM)
+    assert n == (8 if cell == "quadrilateral" else 16)
+
+
+def test_generator_input_errors():
+    with pytest.raises(ValueError, match="n_around must be a multiple of 4"):
+        meshes.cylinder(COMM, radius=0.06, length=0.5, n_around=6, n_along=2)
+    with pytest.raises(ValueError, match="radius must be a finite number > 0"):
+        meshes.cylinder(COMM, radius=-1.0, length=0.5, n_around=8, n_along=2)
+    with pytest.raises(ValueError, match="cell must be"):
+        meshes.strip(COMM, length=1.0, width=1.0, nx=2, ny=2, cell="hex")
+
+
+def _write_msh(path, volume=False):
+    import gmsh
+
+    gmsh.initialize()
+    gmsh.option.setNumber("General.Terminal", 0)
+    if volume:
+        gmsh.model.occ.addBox(0, 0, 0, 1, 1, 1)
+        gmsh.model.occ.synchronize()
+        gmsh.model.addPhysicalGroup(3, [1], 1)
+        gmsh.model.mesh.generate(3)
+    else:
+        gmsh.model.occ.addDisk(0, 0, 0, 1.0, 1.0)
+        gmsh.model.occ.synchronize()
+        gmsh.model.addPhysicalGroup(2, [1], 1)
+        tag = gmsh.model.addPhysicalGroup(1, [1], 7)
+        gmsh.model.setPhysicalName(1, tag, "hem")
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.3)
+        gmsh.model.mesh.generate(2)
+    gmsh.write(str(path))
+    gmsh.finalize()
+
+
+def test_load_user_msh(tmp_path):
+    path = COMM.bcast(tmp_path / "disk.msh" if COMM.rank == 0 else None, root=0)
+    bad = COMM.bcast(tmp_path / "box.msh" if COMM.rank == 0 else None, root=0)
+    if COMM.rank == 0:
+        _write_msh(path)
+        _write_msh(bad, volume=True)
+    COMM.barrier()
+    sm = meshes.load_msh(path, COMM)
+    assert sm.boundaries == {"hem": 7}
+    area = sm.comm.allreduce(
+        float(np.sum(sm.mesh.topology.index_map(2).size_local)), op=MPI.SUM
+    )
+    assert area > 0
+    assert math.isclose(
+        COMM.allreduce(np.max(np.linalg.norm(sm.mesh.geometry.x, axis=1)), op=MPI.MAX), 1.0,
+        rel_tol=1e-6,
+    )
+    with pytest.raises(ValueError, match="volume mesh"):
+        meshes.load_msh(bad, COMM)
+    with pytest.raises(ValueError, match="does not exist"):
+        meshes.load_msh(tmp_path / "nope.msh", COMM)

@@ -1,0 +1,134 @@
+"""Shell model: Taylor tests of energy/residual/Jacobian, rigid-body patch test, bad input."""
+
+import math
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+import dolfinx
+from clothfem import mesh as meshes
+from clothfem.shell import (
+    Clamp,
+    EdgeMoment,
+    EdgeTraction,
+    FabricMaterial,
+    Gravity,
+    PointForce,
+    Pressure,
+    ShellModel,
+)
+from clothfem.shell import rotation as R
+
+COMM = MPI.COMM_WORLD
+MAT = FabricMaterial(E1=1.0e6, E2=0.6e6, G12=0.2e6, nu12=0.3, rho=500.0)
+
+
+@pytest.fixture(scope="module")
+def panel():
+    return meshes.cylinder_panel(
+        COMM, radius=1.0, length=1.5, angle=math.radians(50), n_around=4, n_along=3
+    )
+
+
+def _random_state(model, scale, seed):
+    rng = np.random.default_rng(seed + COMM.rank)
+    x = model.create_vector()
+    x.setArray(rng.normal(size=x.getLocalSize()) * scale)
+    return x
+
+
+def _taylor_orders(errors):
+    return [math.log2(errors[i] / errors[i + 1]) for i in range(len(errors) - 1)]
+
+
+@pytest.mark.parametrize("follower", [False, True])
+def test_jacobian_taylor(panel, follower):
+    """|R(x + h dx) - R(x) - h K dx| = O(h^2)."""
+    model = ShellModel(
+        panel, material=MAT, thickness=0.01, warp=(1.0, 0.3, 0.0),
+        loads=[Pressure(50.0, follower=follower), Gravity()],
+    )
+    model.set_load_factor(1.0)
+    x, dx = _random_state(model, 0.3, 0), _random_state(model, 1.0, 1)
+    f0 = x.duplicate()
+    model.residual(x, f0)
+    K = model.jacobian(x)
+    Kdx = x.duplicate()
+    K.mult(dx, Kdx)
+    errs = []
+    for h in (1e-2, 5e-3, 2.5e-3, 1.25e-3):
+        xh = x.copy()
+        xh.axpy(h, dx)
+        fh = x.duplicate()
+        model.residual(xh, fh)
+        errs.append((fh - f0 - h * Kdx).norm())
+    assert min(_taylor_orders(errs)) > 1.9
+
+
+def test_residual_is_energy_gradient(panel):
+    """|Pi(x + h dx) - Pi(x) - h R . dx| = O(h^2) with all conservative loads."""
+    model = ShellModel(
+        panel, material=MAT, thickness=0.01,
+        loads=[
+            Pressure(50.0, follower=False), Gravity(), EdgeTraction("sides", (1.0, -2.0, 3.0)),
+            EdgeMoment("ends", (0.5, 0.2, -0.1)), PointForce((0.7, 0.0, 1.0), (1.0, 2.0, 3.0)),
+        ],
+    )
+    model.set_load_factor(1.0)
+    x, dx = _random_state(model, 0.2, 2), _random_state(model, 1.0, 3)
+
+    def energy(v):
+        model.set_state(v)
+        return model.strain_energy() - model.external_work()
+
+    f = x.duplicate()
+    model.residual(x, f)
+    slope = f.dot(dx)
+    e0 = energy(x)
+    errs = []
+    for h in (1e-3, 5e-4, 2.5e-4, 1.25e-4):
+        xh = x.copy()
+        xh.axpy(h, dx)
+        errs.append(abs(energy(xh) - e0 - h * slope))
+    assert min(_taylor_orders(errs)) > 1.9
+
+
+def test_rigid_motion_has_zero_strain_energy(panel):
+    """A 90 degree rotation plus a translation of a curved patch: zero energy to round-off."""
+    model = ShellModel(panel, material=MAT, thickness=0.01)
+    axis = np.array([1.0, 2.0, 3.0]) / math.sqrt(14.0)
+    Q = R.rotation_matrix(0.5 * math.pi * axis[None, :])[0]
+    c = np.array([0.3, -0.2, 0.5])
+    X = model.x_nodes
+    model.u.x.array[:] = (X @ Q.T - X + c).ravel()
+    D = model.D.x.array.reshape(-1, 3)
+    model.theta.x.array[:] = R.rotation_from_director(model.basis, D @ Q.T).ravel()
+    model.update_director()
+    rigid = model.strain_energy()
+    # reference: the energy of a 1e-3 uniform stretch of the same patch
+    model.u.x.array[:] = (1e-3 * X).ravel()
+    model.theta.x.array[:] = 0.0
+    model.update_director()
+    stretch = model.strain_energy()
+    assert stretch > 0
+    assert abs(rigid) < 1e-20 * stretch / 1e-6  # round-off relative to a unit-strain energy
+
+
+def test_bad_input_one_line_errors(panel):
+    with pytest.raises(ValueError, match="thickness must be"):
+        ShellModel(panel, material=MAT, thickness=0.0)
+    with pytest.raises(ValueError, match="material E1 must be"):
+        FabricMaterial(E1=-1.0, E2=1.0, G12=1.0)
+    with pytest.raises(ValueError, match="material G12 must be"):
+        FabricMaterial(E1=1.0, E2=1.0, G12=0.0)
+    with pytest.raises(ValueError, match=r"material nu12 must be in \(-2, 2\)"):
+        FabricMaterial(E1=4.0, E2=1.0, G12=1.0, nu12=2.5)
+    with pytest.raises(ValueError, match=r"material nu must be in \(-1, 0.5\)"):
+        FabricMaterial.isotropic(E=1.0, nu=0.5)
+    with pytest.raises(ValueError, match="unknown boundary tag 'cuff'; this mesh has: ends, sides"):
+        ShellModel(panel, material=MAT, thickness=0.01, supports=[Clamp("cuff")])
+    square = dolfinx.mesh.create_unit_square(COMM, 2, 2)
+    flat = meshes.SurfaceMesh(mesh=square, facet_tags=None, boundaries={})
+    with pytest.raises(ValueError, match="surface mesh in 3-D"):
+        ShellModel(flat, material=MAT, thickness=0.01)
