@@ -7,7 +7,7 @@ export OMP_NUM_THREADS := 1
 MPIRUN := mpirun --allow-run-as-root --oversubscribe -n 2
 OUT ?= results
 
-.PHONY: env test test-serial test-mpi test-slow lint demo demo-rollup bench clean
+.PHONY: env test test-serial test-mpi test-slow lint demo demo-rollup demo-body verification bench bench-blas clean
 
 env: .venv/.clothfem-installed
 
@@ -37,6 +37,19 @@ demo: env demo-rollup
 
 demo-rollup: env
 	$(PY) demos/rollup_strip.py --out $(OUT)/rollup
+
+demo-body: env
+	$(PY) demos/body_mocap.py --out $(OUT)/body
+
+## make verification: the README's shell verification table (results/verification.md)
+verification: env
+	$(PY) benchmarks/verification_table.py --out $(OUT)
+
+bench: bench-blas
+	$(PY) benchmarks/contact_projection.py
+
+bench-blas: env
+	$(PY) benchmarks/blas.py
 
 clean:
 	rm -rf $(OUT) .pytest_cache

@@ -14,11 +14,10 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-from mpi4py import MPI
-
 import dolfinx
+import numpy as np
 from dolfinx.io import gmshio
+from mpi4py import MPI
 
 __all__ = ["SurfaceMesh", "strip", "cylinder", "cylinder_panel", "load_msh"]
 
@@ -171,7 +170,11 @@ def cylinder(
         for arc in arcs:
             geo.mesh.setTransfiniteCurve(arc, n_around // 4 + 1)
         out = geo.extrude(
-            [(1, a) for a in arcs], length, 0, 0, numElements=[n_along],
+            [(1, a) for a in arcs],
+            length,
+            0,
+            0,
+            numElements=[n_along],
             recombine=cell == "quadrilateral",
         )
         geo.synchronize()

@@ -48,7 +48,10 @@ class LoadStepping:
                 f"{self.min_increment} and {self.initial_increment}"
             )
         if not (self.initial_increment <= self.max_increment <= 1):
-            raise ValueError(f"LoadStepping max_increment must be in [initial_increment, 1], got {self.max_increment}")
+            raise ValueError(
+                "LoadStepping max_increment must be in [initial_increment, 1], "
+                f"got {self.max_increment}"
+            )
         if self.grow < 1:
             raise ValueError(f"LoadStepping grow must be >= 1, got {self.grow}")
 
@@ -67,7 +70,8 @@ class StepRecord:
 
     def line(self) -> str:
         return (
-            f"step {self.step:3d}  lam {self.load_factor:8.5f}  newton {self.newton_iterations:2d}  "
+            f"step {self.step:3d}  lam {self.load_factor:8.5f}  "
+            f"newton {self.newton_iterations:2d}  "
             f"|R| {self.residual_first:9.3e} -> {self.residual_final:9.3e}  "
             f"cutbacks {self.cutbacks}  {self.wall_time:7.2f} s"
         )
@@ -146,8 +150,8 @@ class NewtonSolver:
 
     def _jacobian(self, snes, x, K, P) -> None:
         self.model.jacobian(x, K)
-        if len(self._rows):
-            K.zeroRows(self._rows + self.model.v_range[0], diag=1.0)
+        # collective: every rank calls it, also with no constrained rows of its own
+        K.zeroRows(self._rows + self.model.v_range[0], diag=1.0)
 
     def solve(self, lam: float) -> tuple[bool, int, float, float]:
         """Solve at load factor ``lam`` from the current state.
@@ -212,8 +216,9 @@ def solve_static(
                 inc = (trial - lam) / 2
                 if inc < stepping.min_increment:
                     raise SolverDivergence(
-                        f"Newton failed at load factor {trial:.6g} with increment {trial - lam:.3g} "
-                        f"below min_increment {stepping.min_increment:g} after {cutbacks} cut-backs "
+                        f"Newton failed at load factor {trial:.6g} with increment "
+                        f"{trial - lam:.3g} below min_increment {stepping.min_increment:g} "
+                        f"after {cutbacks} cut-backs "
                         f"(last residual {r1:.3e})"
                     )
                 trial = lam + inc

@@ -23,9 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import ufl
-from mpi4py import MPI
-
 from dolfinx import fem
+from mpi4py import MPI
 
 from . import mesh as meshes
 from .shell import (
@@ -150,7 +149,12 @@ def run_rollup(
     tip = np.array([L, 0.0, 0.0]) + model.displacement_at((L, 0.0, 0.0))
     err = float(np.linalg.norm(tip)) / L
     res = Result(
-        "roll-up (tip to root)/L", f"{nx}x{ny}", err, 0.0, err, time.perf_counter() - t0,
+        "roll-up (tip to root)/L",
+        f"{nx}x{ny}",
+        err,
+        0.0,
+        err,
+        time.perf_counter() - t0,
         sum(r.newton_iterations for r in recs),
     )
     return res, model
@@ -198,7 +202,12 @@ def run_arc_bending(
     ref2 = comm.allreduce(fem.assemble_scalar(n2), op=MPI.SUM)
     err = math.sqrt(err2 / ref2)
     return Result(
-        "arc bending L2(u)", f"{nx}x{ny}", err, 0.0, err, time.perf_counter() - t0,
+        "arc bending L2(u)",
+        f"{nx}x{ny}",
+        err,
+        0.0,
+        err,
+        time.perf_counter() - t0,
         sum(r.newton_iterations for r in recs),
     )
 
@@ -210,7 +219,9 @@ def run_scordelis_lo(*, n: int, comm: MPI.Comm = MPI.COMM_WORLD) -> Result:
     scaled back (the reference is linear)."""
     t0 = time.perf_counter()
     R, L, t = 25.0, 50.0, 0.25
-    sm = meshes.cylinder_panel(comm, radius=R, length=L, angle=math.radians(40), n_around=n, n_along=n)
+    sm = meshes.cylinder_panel(
+        comm, radius=R, length=L, angle=math.radians(40), n_around=n, n_along=n
+    )
     mat = FabricMaterial.isotropic(E=4.32e8, nu=0.0)
     mat = FabricMaterial(E1=mat.E1, E2=mat.E2, G12=mat.G12, rho=90.0 / t)
 
@@ -233,6 +244,11 @@ def run_scordelis_lo(*, n: int, comm: MPI.Comm = MPI.COMM_WORLD) -> Result:
     w = -model.displacement_at(edge)[2] / lam
     ref = SCORDELIS_LO_REFERENCE
     return Result(
-        "Scordelis-Lo w(midside free edge)", f"{n}x{n}", w, ref, abs(w - ref) / ref,
-        time.perf_counter() - t0, its,
+        "Scordelis-Lo w(midside free edge)",
+        f"{n}x{n}",
+        w,
+        ref,
+        abs(w - ref) / ref,
+        time.perf_counter() - t0,
+        its,
     )

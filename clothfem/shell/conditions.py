@@ -51,7 +51,9 @@ class Gravity:
     acceleration: tuple[float, float, float] = (0.0, 0.0, -9.81)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "acceleration", _vector("Gravity", "acceleration", self.acceleration))
+        object.__setattr__(
+            self, "acceleration", _vector("Gravity", "acceleration", self.acceleration)
+        )
 
 
 @dataclass(frozen=True)
@@ -168,7 +170,9 @@ class Prescribed:
         if self.rotation is not None:
             object.__setattr__(self, "rotation", _vector("Prescribed", "rotation", self.rotation))
         if not self.components or any(c not in (0, 1, 2) for c in self.components):
-            raise ValueError(f"Prescribed components must be among 0, 1, 2, got {self.components!r}")
+            raise ValueError(
+                f"Prescribed components must be among 0, 1, 2, got {self.components!r}"
+            )
         if self.displacement is None and self.rotation is None:
             raise ValueError("Prescribed needs a displacement or a rotation, got neither")
 

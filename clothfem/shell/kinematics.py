@@ -67,7 +67,10 @@ def shell_strains(u, d, D, frame) -> tuple:
     d_s = [Fd * e[i] for i in range(2)]
     D_s = [FD * e[i] for i in range(2)]
     eps = ufl.as_matrix(
-        [[0.5 * (ufl.dot(a[i], a[j]) - (1.0 if i == j else 0.0)) for j in range(2)] for i in range(2)]
+        [
+            [0.5 * (ufl.dot(a[i], a[j]) - (1.0 if i == j else 0.0)) for j in range(2)]
+            for i in range(2)
+        ]
     )
     kappa = ufl.as_matrix(
         [

@@ -24,14 +24,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import numpy as np
-import ufl
-from mpi4py import MPI
-from petsc4py import PETSc
-
 import dolfinx
 import dolfinx.fem.petsc as fem_petsc
+import numpy as np
+import ufl
 from dolfinx import fem, la
+from mpi4py import MPI
+from petsc4py import PETSc
 
 from ..mesh import SurfaceMesh
 from . import rotation
@@ -158,7 +157,9 @@ class ShellModel:
         """Nodal reference directors: averaged unit cell normals at the nodes."""
         mesh, V = self.mesh, self.V
         J = ufl.Jacobian(mesh)
-        n = ufl.cross(ufl.as_vector([J[i, 0] for i in range(3)]), ufl.as_vector([J[i, 1] for i in range(3)]))
+        n = ufl.cross(
+            ufl.as_vector([J[i, 0] for i in range(3)]), ufl.as_vector([J[i, 1] for i in range(3)])
+        )
         expr = fem.Expression(n / ufl.sqrt(ufl.dot(n, n)), V.element.interpolation_points())
         n_cells = mesh.topology.index_map(2).size_local
         cells = np.arange(n_cells, dtype=np.int32)
@@ -200,12 +201,11 @@ class ShellModel:
             if isinstance(s, Clamp | Pin | Symmetry):
                 comps = (s.axis,) if isinstance(s, Symmetry) else (0, 1, 2)
                 rows = (3 * nodes[:, None] + np.array(comps)).ravel()
-                self._add_bc(rows, lambda lam, n=len(rows): np.zeros(n))
+                self._add_bc(rows)
                 if isinstance(s, Clamp):
-                    rows = (nu + 2 * nodes[:, None] + np.arange(2)).ravel()
-                    self._add_bc(rows, lambda lam, n=len(rows): np.zeros(n))
+                    self._add_bc((nu + 2 * nodes[:, None] + np.arange(2)).ravel())
                 elif isinstance(s, Symmetry):
-                    self._add_bc(nu + 2 * nodes + 1, lambda lam, n=len(nodes): np.zeros(n))
+                    self._add_bc(nu + 2 * nodes + 1)  # theta2 = 0: rotation about the normal
             elif isinstance(s, Prescribed):
                 X = self.x_nodes[nodes]
                 comps = np.array(s.components)
@@ -218,15 +218,19 @@ class ShellModel:
                             return np.asarray(disp(X, lam), dtype=float)[:, comps].ravel()
 
                     else:
-                        vec = np.asarray(disp)[comps]
+                        vec, count = np.asarray(disp)[comps], len(nodes)
 
-                        def fn(lam, vec=vec, n=len(nodes)):
-                            return np.tile(lam * vec, n)
+                        def fn(lam, vec=vec, count=count):
+                            return np.tile(lam * vec, count)
 
                     self._add_bc(rows, fn)
                 if s.rotation is not None:
                     rows = (nu + 2 * nodes[:, None] + np.arange(2)).ravel()
-                    basis, D0, omega = self.basis[nodes], self.D.x.array.reshape(-1, 3)[nodes], np.array(s.rotation)
+                    basis, D0, omega = (
+                        self.basis[nodes],
+                        self.D.x.array.reshape(-1, 3)[nodes],
+                        np.array(s.rotation),
+                    )
 
                     def fn(lam, basis=basis, D0=D0, omega=omega):
                         Rm = rotation.rotation_matrix((lam * omega)[None, :])[0]
@@ -234,9 +238,11 @@ class ShellModel:
 
                     self._add_bc(rows, fn)
 
-    def _add_bc(self, rows: np.ndarray, fn) -> None:
-        self._bc_rows.append(np.asarray(rows, dtype=np.int32))
-        self._bc_value_fns.append(fn)
+    def _add_bc(self, rows: np.ndarray, fn=None) -> None:
+        """Constrain ``rows``; ``fn(lam)`` gives their values (zero when None)."""
+        rows = np.asarray(rows, dtype=np.int32)
+        self._bc_rows.append(rows)
+        self._bc_value_fns.append(fn or (lambda lam, n=rows.size: np.zeros(n)))
 
     def bc_rows_and_values(self, lam: float) -> tuple[np.ndarray, np.ndarray]:
         """Local rows (in the owned (u, theta) layout) and their prescribed values at ``lam``."""
@@ -300,7 +306,9 @@ class ShellModel:
                 m = fem.Constant(mesh, np.array(load.moment))
                 th = self.theta
                 rotvec = th[0] * E1 + th[1] * E2
-                self._moment_work += self.lam * ufl.dot(m, rotvec) * ds(self.surface.boundaries[load.where])
+                self._moment_work += (
+                    self.lam * ufl.dot(m, rotvec) * ds(self.surface.boundaries[load.where])
+                )
             elif isinstance(load, PointForce):
                 self._point_forces.append(load)
             else:
@@ -316,7 +324,9 @@ class ShellModel:
         self._energy_form = fem.form(Pi)
         self._wext_form = fem.form(W_ext) if W_ext != 0 else None
         if self._moment_work != 0:
-            self._Rm_form = fem.form(ufl.derivative(self._moment_work, self.theta, ufl.TestFunction(self.Vt)))
+            self._Rm_form = fem.form(
+                ufl.derivative(self._moment_work, self.theta, ufl.TestFunction(self.Vt))
+            )
             self._wm_form = fem.form(self._moment_work)
         else:
             self._Rm_form = self._wm_form = None
@@ -326,7 +336,9 @@ class ShellModel:
         rows, values = [], []
         xo = self.x_nodes[: self.n_owned]
         for pf in self._point_forces:
-            dist = np.linalg.norm(xo - np.array(pf.point), axis=1) if len(xo) else np.array([np.inf])
+            dist = (
+                np.linalg.norm(xo - np.array(pf.point), axis=1) if len(xo) else np.array([np.inf])
+            )
             i = int(np.argmin(dist))
             best = self.comm.allreduce((float(dist[i]), self.comm.rank), op=MPI.MINLOC)
             if best[1] == self.comm.rank:
@@ -483,6 +495,8 @@ class ShellModel:
         xo = self.x_nodes[: self.n_owned]
         dist = np.linalg.norm(xo - np.asarray(point), axis=1) if len(xo) else np.array([np.inf])
         i = int(np.argmin(dist)) if len(xo) else 0
-        best = self.comm.allreduce((float(dist[i]) if len(xo) else np.inf, self.comm.rank), op=MPI.MINLOC)
+        best = self.comm.allreduce(
+            (float(dist[i]) if len(xo) else np.inf, self.comm.rank), op=MPI.MINLOC
+        )
         val = self.u.x.array[3 * i : 3 * i + 3].copy() if best[1] == self.comm.rank else None
         return self.comm.bcast(val, root=best[1])

@@ -136,7 +136,8 @@ def rotation_matrix(rotvec: np.ndarray) -> np.ndarray:
     safe = np.where(phi < _SMALL, 1.0, phi)
     x = phi * phi
     c2 = np.where(
-        phi < _SMALL, 1 / 2 - x / 24 + x**2 / 720 - x**3 / 40320 + x**4 / 3628800,
+        phi < _SMALL,
+        1 / 2 - x / 24 + x**2 / 720 - x**3 / 40320 + x**4 / 3628800,
         (1 - np.cos(safe)) / safe**2,
     )
     W = np.zeros((len(rv), 3, 3))

@@ -71,12 +71,11 @@ def test_load_user_msh(tmp_path):
     COMM.barrier()
     sm = meshes.load_msh(path, COMM)
     assert sm.boundaries == {"hem": 7}
-    area = sm.comm.allreduce(
-        float(np.sum(sm.mesh.topology.index_map(2).size_local)), op=MPI.SUM
-    )
+    area = sm.comm.allreduce(float(np.sum(sm.mesh.topology.index_map(2).size_local)), op=MPI.SUM)
     assert area > 0
     assert math.isclose(
-        COMM.allreduce(np.max(np.linalg.norm(sm.mesh.geometry.x, axis=1)), op=MPI.MAX), 1.0,
+        COMM.allreduce(np.max(np.linalg.norm(sm.mesh.geometry.x, axis=1)), op=MPI.MAX),
+        1.0,
         rel_tol=1e-6,
     )
     with pytest.raises(ValueError, match="volume mesh"):

@@ -2,11 +2,11 @@
 
 import math
 
+import dolfinx
 import numpy as np
 import pytest
 from mpi4py import MPI
 
-import dolfinx
 from clothfem import mesh as meshes
 from clothfem.shell import (
     Clamp,
@@ -46,7 +46,10 @@ def _taylor_orders(errors):
 def test_jacobian_taylor(panel, follower):
     """|R(x + h dx) - R(x) - h K dx| = O(h^2)."""
     model = ShellModel(
-        panel, material=MAT, thickness=0.01, warp=(1.0, 0.3, 0.0),
+        panel,
+        material=MAT,
+        thickness=0.01,
+        warp=(1.0, 0.3, 0.0),
         loads=[Pressure(50.0, follower=follower), Gravity()],
     )
     model.set_load_factor(1.0)
@@ -69,10 +72,15 @@ def test_jacobian_taylor(panel, follower):
 def test_residual_is_energy_gradient(panel):
     """|Pi(x + h dx) - Pi(x) - h R . dx| = O(h^2) with all conservative loads."""
     model = ShellModel(
-        panel, material=MAT, thickness=0.01,
+        panel,
+        material=MAT,
+        thickness=0.01,
         loads=[
-            Pressure(50.0, follower=False), Gravity(), EdgeTraction("sides", (1.0, -2.0, 3.0)),
-            EdgeMoment("ends", (0.5, 0.2, -0.1)), PointForce((0.7, 0.0, 1.0), (1.0, 2.0, 3.0)),
+            Pressure(50.0, follower=False),
+            Gravity(),
+            EdgeTraction("sides", (1.0, -2.0, 3.0)),
+            EdgeMoment("ends", (0.5, 0.2, -0.1)),
+            PointForce((0.7, 0.0, 1.0), (1.0, 2.0, 3.0)),
         ],
     )
     model.set_load_factor(1.0)

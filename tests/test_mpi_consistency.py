@@ -1,0 +1,49 @@
+"""The same answers on 1 and 2 MPI ranks: run a demo under mpirun and compare."""
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from mpi4py import MPI
+
+from clothfem import verification as V
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.serial
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="launches its own mpirun")
+@pytest.mark.skipif(shutil.which("mpirun") is None, reason="no mpirun")
+def test_rollup_same_on_two_ranks(tmp_path):
+    serial, _ = V.run_rollup(nx=10, ny=1, steps=10)
+    cmd = [
+        "mpirun",
+        "--allow-run-as-root",
+        "--oversubscribe",
+        "-n",
+        "2",
+        sys.executable,
+        "-m",
+        "mpi4py",
+        str(ROOT / "demos" / "rollup_strip.py"),
+        "--out",
+        str(tmp_path),
+        "--nx",
+        "10",
+        "--ny",
+        "1",
+        "--steps",
+        "10",
+    ]
+    # a child mpirun must not inherit this (singleton) MPI process's environment
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    assert res.returncode == 0, res.stderr[-2000:]
+    out = res.stdout
+    value = float(re.search(r"\|tip - root\| / L = (\S+)", out).group(1))
+    assert abs(value - serial.error) <= 1e-2 * serial.error  # printed with 3 digits
+    assert (tmp_path / "history.csv").read_text().count("\n") == 11
