@@ -23,7 +23,7 @@ test-serial: env
 	$(PY) -m pytest -q -m "not slow" tests
 
 test-mpi: env
-	$(MPIRUN) $(PY) -m mpi4py -m pytest -q -m "not slow and not serial" -p no:cacheprovider tests
+	$(MPIRUN) $(PY) -m mpi4py -m pytest -q -m "not slow and not serial" -p no:cacheprovider --color=no tests
 
 test-slow: env
 	$(PY) -m pytest -q -m slow tests

@@ -1,0 +1,381 @@
+"""Scene files (TOML): schema, defaults, validation and ``--set`` overrides.
+
+A scene fully describes a run: fabric mesh, material and thickness, supports and loads, the
+body and its motion, contact, the integrator and the outputs. The schema below is the single
+source of truth: :func:`validate` checks a parsed file against it (unknown keys rejected,
+one-line errors naming the key and the allowed values) and fills defaults, and
+:func:`schema_markdown` renders it as the reference table of ``docs/scene.md``.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+__all__ = ["SceneError", "load", "validate", "apply_overrides", "schema_markdown", "MATERIALS"]
+
+
+class SceneError(ValueError):
+    """An invalid scene: the message names the key and the allowed values."""
+
+
+@dataclass(frozen=True)
+class Key:
+    """One scene key: kind in {str, int, float, bool, vec3, floats, choice}."""
+
+    kind: str
+    doc: str
+    default: Any = None
+    required: bool = False
+    lo: float | None = None  # inclusive unless open_lo
+    hi: float | None = None
+    open_lo: bool = False
+    choices: tuple[str, ...] = ()
+
+    def describe(self) -> str:
+        if self.kind == "choice":
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        rng = ""
+        if self.lo is not None or self.hi is not None:
+            left = "(" if self.open_lo else "["
+            lo = "-inf" if self.lo is None else f"{self.lo:g}"
+            hi = "inf" if self.hi is None else f"{self.hi:g}"
+            rng = f" in {left}{lo}, {hi}]"
+        kinds = {
+            "vec3": "3 numbers",
+            "floats": "a list of numbers",
+            "float": "a number",
+            "int": "an integer",
+            "str": "a string",
+            "bool": "true or false",
+        }
+        return kinds[self.kind] + rng
+
+
+@dataclass(frozen=True)
+class Section:
+    keys: dict[str, Key]
+    doc: str = ""
+    many: bool = False  # an array of tables ([[...]])
+    optional: bool = False  # the whole table may be absent
+    variants: dict[str, tuple[str, ...]] = field(default_factory=dict)  # type -> required keys
+
+
+POS = dict(lo=0.0, open_lo=True)
+
+MATERIALS = {
+    # Man & Swan (2007) Sec. 4.1.5; G = E / 200 for sets II and III, 0.1 MPa for set I.
+    "crimped-cotton": dict(E1=1.2e6, E2=1.2e6, G12=1.0e5, rho=436.0),
+    "decrimped-cotton": dict(E1=350e6, E2=350e6, G12=350e6 / 200, rho=436.0),
+    "kevlar": dict(E1=7.2e9, E2=7.2e9, G12=7.2e9 / 200, rho=700.0),
+}
+
+SCHEMA: dict[str, Section] = {
+    "scene": Section(
+        {
+            "name": Key("str", "name of the run", required=True),
+            "description": Key("str", "free text", default=""),
+        },
+        "what the run is",
+    ),
+    "mesh": Section(
+        {
+            "generator": Key(
+                "choice",
+                "mesh source",
+                required=True,
+                choices=("strip", "cylinder", "panel", "file"),
+            ),
+            "file": Key("str", "gmsh .msh surface mesh with physical groups (generator = file)"),
+            "length": Key("float", "strip/tube/panel length along x [m]", **POS),
+            "width": Key("float", "strip width [m]", **POS),
+            "radius": Key("float", "tube/panel radius [m]", **POS),
+            "angle": Key("float", "panel half-opening angle [deg]", lo=0.0, hi=180.0, open_lo=True),
+            "nx": Key("int", "strip cells along x", lo=1),
+            "ny": Key("int", "strip cells across", lo=1),
+            "n_around": Key("int", "tube/panel cells around (tube: multiple of 4)", lo=1),
+            "n_along": Key("int", "tube/panel cells along x", lo=1),
+            "cell": Key(
+                "choice",
+                "cell type",
+                default="quadrilateral",
+                choices=("quadrilateral", "triangle"),
+            ),
+            "order": Key("int", "geometry order", default=2, lo=1, hi=2),
+            "translate": Key("vec3", "translation applied to the generated mesh [m]", default=None),
+        },
+        "the fabric surface",
+        variants={
+            "strip": ("length", "width", "nx", "ny"),
+            "cylinder": ("radius", "length", "n_around", "n_along"),
+            "panel": ("radius", "length", "angle", "n_around", "n_along"),
+            "file": ("file",),
+        },
+    ),
+    "material": Section(
+        {
+            "preset": Key(
+                "choice",
+                "named material (explicit keys override it)",
+                default=None,
+                choices=tuple(MATERIALS),
+            ),
+            "E1": Key("float", "warp Young's modulus [Pa]", **POS),
+            "E2": Key("float", "weft Young's modulus [Pa]", **POS),
+            "G12": Key("float", "in-plane shear modulus [Pa]", **POS),
+            "nu12": Key("float", "major Poisson ratio [-], |nu12| < sqrt(E1/E2)", default=0.0),
+            "rho": Key("float", "mass density [kg/m^3]", default=0.0, lo=0.0),
+            "thickness": Key("float", "fabric thickness [m]", required=True, **POS),
+            "warp": Key(
+                "vec3", "global direction projected on the surface as warp", default=[1.0, 0.0, 0.0]
+            ),
+        },
+        "the fabric material (orthotropic St. Venant-Kirchhoff, plane stress)",
+    ),
+    "supports": Section(
+        {
+            "type": Key(
+                "choice",
+                "support kind",
+                required=True,
+                choices=("clamp", "pin", "symmetry", "prescribed"),
+            ),
+            "where": Key("str", "boundary name of the mesh", required=True),
+            "axis": Key("int", "symmetry plane normal axis (0 = x, 1 = y, 2 = z)", lo=0, hi=2),
+            "displacement": Key("vec3", "prescribed displacement at load factor 1 [m]"),
+            "components": Key("floats", "constrained displacement components", default=[0, 1, 2]),
+            "rotation": Key("vec3", "prescribed director rotation vector at load factor 1 [rad]"),
+        },
+        "fabric supports",
+        many=True,
+        optional=True,
+        variants={"clamp": (), "pin": (), "symmetry": ("axis",), "prescribed": ()},
+    ),
+    "loads": Section(
+        {
+            "type": Key(
+                "choice",
+                "load kind",
+                required=True,
+                choices=("gravity", "pressure", "edge_traction", "edge_moment", "point_force"),
+            ),
+            "acceleration": Key("vec3", "gravity [m/s^2]", default=[0.0, 0.0, -9.81]),
+            "value": Key("float", "pressure [Pa]"),
+            "follower": Key("bool", "pressure follows the surface", default=True),
+            "where": Key("str", "boundary name (edge loads)"),
+            "traction": Key("vec3", "edge force per length [N/m]"),
+            "moment": Key("vec3", "edge moment per length [N m/m]"),
+            "point": Key("vec3", "point of a point force [m]"),
+            "force": Key("vec3", "point force [N]"),
+        },
+        "fabric loads (scaled by the load factor)",
+        many=True,
+        optional=True,
+        variants={
+            "gravity": (),
+            "pressure": ("value",),
+            "edge_traction": ("where", "traction"),
+            "edge_moment": ("where", "moment"),
+            "point_force": ("point", "force"),
+        },
+    ),
+    "solver": Section(
+        {
+            "integrator": Key(
+                "choice",
+                "time integration",
+                default="static",
+                choices=("static", "newmark", "generalized-alpha", "central-difference"),
+            ),
+            "steps": Key("int", "static: initial number of load steps", default=10, lo=1),
+            "min_increment": Key("float", "static: smallest load increment", default=1e-4, **POS),
+            "max_increment": Key(
+                "float",
+                "static: largest load increment",
+                default=0.25,
+                lo=0.0,
+                hi=1.0,
+                open_lo=True,
+            ),
+        },
+        "the solver",
+        optional=True,
+    ),
+    "output": Section(
+        {
+            "every": Key("int", "write fields every N accepted steps", default=1, lo=1),
+            "png": Key("bool", "write PNG snapshots", default=True),
+        },
+        "what is written",
+        optional=True,
+    ),
+}
+
+
+def _fail(path: str, msg: str) -> None:
+    raise SceneError(f"scene key '{path}': {msg}")
+
+
+def _check_value(path: str, key: Key, value: Any) -> Any:
+    def number(v) -> bool:
+        return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+    if key.kind == "str":
+        if not isinstance(value, str):
+            _fail(path, f"must be a string, got {value!r}")
+    elif key.kind == "bool":
+        if not isinstance(value, bool):
+            _fail(path, f"must be true or false, got {value!r}")
+    elif key.kind == "choice":
+        if value not in key.choices:
+            _fail(path, f"must be {key.describe()}, got {value!r}")
+    elif key.kind == "vec3":
+        if not (isinstance(value, list) and len(value) == 3 and all(number(v) for v in value)):
+            _fail(path, f"must be 3 finite numbers, got {value!r}")
+        value = [float(v) for v in value]
+    elif key.kind == "floats":
+        if not (isinstance(value, list) and all(number(v) for v in value)):
+            _fail(path, f"must be a list of numbers, got {value!r}")
+    elif key.kind in ("int", "float"):
+        if key.kind == "int" and not (isinstance(value, int) and not isinstance(value, bool)):
+            _fail(path, f"must be {key.describe()}, got {value!r}")
+        if not number(value):
+            _fail(path, f"must be {key.describe()}, got {value!r}")
+        below = key.lo is not None and (value <= key.lo if key.open_lo else value < key.lo)
+        above = key.hi is not None and value > key.hi
+        if below or above:
+            _fail(path, f"must be {key.describe()}, got {value!r}")
+        value = float(value) if key.kind == "float" else value
+    return value
+
+
+def _validate_table(path: str, section: Section, table: Any) -> dict[str, Any]:
+    if not isinstance(table, dict):
+        _fail(path, "must be a table")
+    unknown = sorted(set(table) - set(section.keys))
+    if unknown:
+        _fail(f"{path}.{unknown[0]}", f"unknown key; allowed: {', '.join(section.keys)}")
+    out: dict[str, Any] = {}
+    for name, key in section.keys.items():
+        if name in table:
+            out[name] = _check_value(f"{path}.{name}", key, table[name])
+        elif key.required:
+            _fail(f"{path}.{name}", f"required ({key.doc}; {key.describe()})")
+        else:
+            out[name] = copy.deepcopy(key.default)
+    kind = out.get("type", out.get("generator"))
+    for name in section.variants.get(kind, ()):
+        if out.get(name) is None:
+            _fail(f"{path}.{name}", f"required for {kind!r} ({section.keys[name].doc})")
+    return out
+
+
+def validate(data: dict[str, Any]) -> dict[str, Any]:
+    """Validate a parsed scene and fill defaults; raises :class:`SceneError` (one line)."""
+    unknown = sorted(set(data) - set(SCHEMA))
+    if unknown:
+        _fail(unknown[0], f"unknown table; allowed: {', '.join(SCHEMA)}")
+    out: dict[str, Any] = {}
+    for name, section in SCHEMA.items():
+        if name not in data:
+            if not section.optional:
+                _fail(name, f"required table ({section.doc})")
+            out[name] = [] if section.many else _validate_table(name, section, {})
+            continue
+        if section.many:
+            if not isinstance(data[name], list):
+                _fail(name, "must be an array of tables ([[" + name + "]])")
+            out[name] = [
+                _validate_table(f"{name}[{i}]", section, t) for i, t in enumerate(data[name])
+            ]
+        else:
+            out[name] = _validate_table(name, section, data[name])
+    mat = out["material"]
+    if mat["preset"] is not None:
+        for k, v in MATERIALS[mat["preset"]].items():
+            if k not in data["material"]:
+                mat[k] = v
+    for k in ("E1", "E2", "G12"):
+        if mat[k] is None:
+            _fail(f"material.{k}", "required (or give material.preset)")
+    limit = math.sqrt(mat["E1"] / mat["E2"])
+    if not abs(mat["nu12"]) < limit:
+        _fail("material.nu12", f"must be in (-{limit:.4g}, {limit:.4g}), got {mat['nu12']!r}")
+    if out["mesh"]["generator"] == "cylinder" and out["mesh"]["n_around"] % 4:
+        _fail(
+            "mesh.n_around",
+            f"must be a multiple of 4 for a cylinder, got {out['mesh']['n_around']}",
+        )
+    return out
+
+
+def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
+    """Apply ``key.path=value`` overrides (values in TOML syntax, e.g. ``mesh.nx=8``,
+    ``material.warp=[0,1,0]``, ``loads.0.value=5``) to a parsed (unvalidated) scene."""
+    data = copy.deepcopy(data)
+    for item in overrides:
+        if "=" not in item:
+            raise SceneError(f"--set {item!r}: expected key.path=value")
+        path, raw = item.split("=", 1)
+        try:
+            value = tomllib.loads(f"v = {raw}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw  # a bare string
+        parts = path.strip().split(".")
+        node: Any = data
+        for p in parts[:-1]:
+            if isinstance(node, list):
+                if not p.isdigit() or int(p) >= len(node):
+                    raise SceneError(f"--set {path}: no element {p!r}")
+                node = node[int(p)]
+            else:
+                node = node.setdefault(p, {})
+        last = parts[-1]
+        if isinstance(node, list):
+            raise SceneError(f"--set {path}: cannot replace a whole list element")
+        node[last] = value
+    return data
+
+
+def load(path: str | Path, overrides: list[str] | None = None) -> dict[str, Any]:
+    """Read, override and validate a scene file."""
+    path = Path(path)
+    if not path.is_file():
+        raise SceneError(f"scene file {str(path)!r} does not exist")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"scene file {path.name!r} is not valid TOML: {exc}") from None
+    return validate(apply_overrides(data, overrides or []))
+
+
+def schema_markdown() -> str:
+    """The reference table of every scene key (``docs/scene.md`` is generated from it)."""
+    lines = []
+    for name, section in SCHEMA.items():
+        head = f"[[{name}]]" if section.many else f"[{name}]"
+        opt = " (optional)" if section.optional else ""
+        lines += [
+            f"### `{head}`{opt}",
+            "",
+            section.doc,
+            "",
+            "| key | allowed | default | meaning |",
+            "|---|---|---|---|",
+        ]
+        for key_name, key in section.keys.items():
+            default = (
+                "required" if key.required else ("—" if key.default is None else repr(key.default))
+            )
+            lines.append(f"| `{key_name}` | {key.describe()} | {default} | {key.doc} |")
+        if section.variants:
+            lines += [""] + [
+                f"- `{kind}` requires: {', '.join(f'`{k}`' for k in req) or 'nothing more'}"
+                for kind, req in section.variants.items()
+            ]
+        lines.append("")
+    return "\n".join(lines)

@@ -1,0 +1,163 @@
+"""Scene files: validation messages, defaults, overrides, docs, and runs through the CLI."""
+
+import csv
+import math
+from pathlib import Path
+
+import pytest
+from mpi4py import MPI
+
+from clothfem import scene as scenes
+from clothfem import verification as V
+from clothfem.cli import main
+
+COMM = MPI.COMM_WORLD
+ROOT = Path(__file__).resolve().parents[2]
+
+MINIMAL = {
+    "scene": {"name": "t"},
+    "mesh": {"generator": "strip", "length": 10.0, "width": 1.0, "nx": 10, "ny": 1},
+    "material": {"E1": 1.2e6, "E2": 1.2e6, "G12": 6e5, "thickness": 0.1},
+}
+
+
+def _with(path: str, value):
+    data = scenes.apply_overrides(MINIMAL, [])
+    node = data
+    parts = path.split(".")
+    for p in parts[:-1]:
+        node = node.setdefault(p, {})
+    node[parts[-1]] = value
+    return data
+
+
+def test_defaults_filled():
+    s = scenes.validate(MINIMAL)
+    assert s["solver"]["integrator"] == "static" and s["material"]["nu12"] == 0.0
+    assert s["supports"] == [] and s["mesh"]["order"] == 2
+
+
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        (_with("extra.x", 1), "scene key 'extra': unknown table; allowed: scene, mesh"),
+        (_with("mesh.nxx", 3), "scene key 'mesh.nxx': unknown key; allowed: generator"),
+        (
+            _with("material.thickness", -1e-3),
+            r"'material.thickness': must be a number in \(0, inf\]",
+        ),
+        (_with("material.E1", "soft"), r"'material.E1': must be a number in \(0, inf\]"),
+        (_with("material.nu12", 1.5), r"'material.nu12': must be in \(-1, 1\)"),
+        (_with("mesh.generator", "sphere"), "'mesh.generator': must be one of 'strip', 'cylinder'"),
+        (_with("mesh.nx", 2.5), r"'mesh.nx': must be an integer in \[1, inf\]"),
+        (_with("material.warp", [1, 0]), "'material.warp': must be 3 finite numbers"),
+        (
+            _with("supports", [{"type": "symmetry", "where": "root"}]),
+            r"'supports\[0\].axis': required",
+        ),
+        (_with("loads", [{"type": "pressure"}]), r"'loads\[0\].value': required for 'pressure'"),
+        ({k: v for k, v in MINIMAL.items() if k != "mesh"}, "scene key 'mesh': required table"),
+        (
+            _with(
+                "mesh",
+                {
+                    "generator": "cylinder",
+                    "radius": 0.06,
+                    "length": 0.5,
+                    "n_around": 6,
+                    "n_along": 2,
+                },
+            ),
+            "'mesh.n_around': must be a multiple of 4",
+        ),
+        (_with("solver.integrator", "euler"), "'solver.integrator': must be one of 'static'"),
+    ],
+)
+def test_bad_scenes_one_line_errors(data, message):
+    with pytest.raises(scenes.SceneError, match=message) as info:
+        scenes.validate(data)
+    assert "\n" not in str(info.value)
+
+
+def test_overrides_and_preset():
+    data = dict(MINIMAL, material={"preset": "kevlar", "thickness": 1e-3})
+    s = scenes.validate(scenes.apply_overrides(data, ["mesh.nx=4", "material.E2=1e9"]))
+    assert s["mesh"]["nx"] == 4 and s["material"]["E1"] == 7.2e9 and s["material"]["E2"] == 1e9
+    assert s["material"]["G12"] == 7.2e9 / 200 and s["material"]["rho"] == 700.0
+    with pytest.raises(scenes.SceneError, match="expected key.path=value"):
+        scenes.apply_overrides(MINIMAL, ["mesh.nx"])
+
+
+def test_docs_match_schema():
+    text = (ROOT / "docs" / "scene.md").read_text()
+    assert scenes.schema_markdown() in text, "regenerate docs/scene.md with `clothfem schema`"
+
+
+def test_example_scenes_are_valid():
+    for path in sorted((ROOT / "demos" / "scenes").glob("*.toml")):
+        scenes.load(path)
+
+
+def _shared_dir(tmp_path):
+    return Path(COMM.bcast(str(tmp_path) if COMM.rank == 0 else None, root=0))
+
+
+def test_scene_run_matches_elastica(tmp_path):
+    """A strip scene under a dead end shear PL^2/EI = 1 through the CLI: tip vs the elastica."""
+    out = _shared_dir(tmp_path)
+    L, b, t, E = 10.0, 1.0, 0.1, 1.2e6
+    P = 1.0 * E * b * t**3 / 12 / L**2
+    scene = out / "s.toml"
+    if COMM.rank == 0:
+        scene.write_text(
+            '[scene]\nname = "elastica"\n[mesh]\ngenerator = "strip"\nlength = 10.0\nwidth = 1.0\n'
+            "nx = 10\nny = 1\n[material]\nE1 = 1.2e6\nE2 = 1.2e6\nG12 = 6e5\nthickness = 0.1\n"
+            '[[supports]]\ntype = "clamp"\nwhere = "root"\n'
+            f'[[loads]]\ntype = "edge_traction"\nwhere = "tip"\ntraction = [0.0, 0.0, {P / b!r}]\n'
+            "[solver]\nsteps = 2\n[output]\npng = false\n"
+        )
+    COMM.barrier()
+    assert main(["run", str(scene), "--out", str(out / "r")]) == 0
+    rows = list(csv.DictReader((out / "r" / "history.csv").open()))
+    assert float(rows[-1]["load_factor"]) == 1.0
+    # the tip displacement of the model the runner builds from the same scene
+    from clothfem.run import build_model
+
+    model, log = build_model(scenes.load(scene), COMM)
+    assert any("contact: not built" in line for line in log)
+    from clothfem.static import LoadStepping, solve_static
+
+    solve_static(model, stepping=LoadStepping(initial_increment=0.5, max_increment=0.5))
+    tip = model.displacement_at((L, 0.0, 0.0))
+    u_ex, w_ex = V.elastica_tip(1.0)
+    assert math.isclose(tip[2] / L, w_ex, rel_tol=5e-3) and math.isclose(
+        -tip[0] / L, u_ex, rel_tol=5e-3
+    )
+
+
+def test_failed_run_keeps_written_steps(tmp_path, capsys):
+    """Gravity across a soft sleeve wrinkles it; the quasi-static path stops with a clear
+    message (exit status 3) and the steps already written stay in history.csv."""
+    out = _shared_dir(tmp_path) / "fail"
+    code = main(
+        [
+            "run",
+            str(ROOT / "demos" / "scenes" / "sleeve_gravity.toml"),
+            "--out",
+            str(out),
+            "--set",
+            "loads.0.acceleration=[0,0,-9.81]",
+            "--set",
+            "mesh.n_around=8",
+            "--set",
+            "mesh.n_along=6",
+            "--set",
+            "solver.min_increment=0.01",
+            "--set",
+            "output.png=false",
+        ]
+    )
+    assert code == 3
+    assert "Newton failed at load factor" in capsys.readouterr().err
+    rows = list(csv.DictReader((out / "history.csv").open()))
+    assert len(rows) >= 2 and all(0 < float(r["load_factor"]) < 1 for r in rows)
