@@ -204,7 +204,7 @@ def cylinder_panel(
     """Cylindrical panel (roof) of axis +x: x in [0, length], polar angle in [-angle, angle]
     measured from +z (so the crest is at y = 0, z = radius).
 
-    Boundaries: ``ends`` (x = 0 and x = length) and ``sides`` (the straight free edges).
+    Boundaries: ``start`` (x = 0), ``end`` (x = length) and ``sides`` (the straight edges).
     Used by the Scordelis-Lo roof benchmark.
     """
     radius, length = _positive("radius", radius), _positive("length", length)
@@ -228,8 +228,9 @@ def cylinder_panel(
         geo.synchronize()
         far, surf, side_a, side_b = (tag for _, tag in out)
         gmsh.model.addPhysicalGroup(2, [surf], 1)
-        tags = {"ends": 1, "sides": 2}
-        gmsh.model.addPhysicalGroup(1, [arc, far], tags["ends"])
+        tags = {"start": 1, "end": 2, "sides": 3}
+        gmsh.model.addPhysicalGroup(1, [arc], tags["start"])
+        gmsh.model.addPhysicalGroup(1, [far], tags["end"])
         gmsh.model.addPhysicalGroup(1, [side_a, side_b], tags["sides"])
         return tags
 

@@ -79,7 +79,7 @@ def test_residual_is_energy_gradient(panel):
             Pressure(50.0, follower=False),
             Gravity(),
             EdgeTraction("sides", (1.0, -2.0, 3.0)),
-            EdgeMoment("ends", (0.5, 0.2, -0.1)),
+            EdgeMoment("end", (0.5, 0.2, -0.1)),
             PointForce((0.7, 0.0, 1.0), (1.0, 2.0, 3.0)),
         ],
     )
@@ -134,7 +134,7 @@ def test_bad_input_one_line_errors(panel):
         FabricMaterial(E1=4.0, E2=1.0, G12=1.0, nu12=2.5)
     with pytest.raises(ValueError, match=r"material nu must be in \(-1, 0.5\)"):
         FabricMaterial.isotropic(E=1.0, nu=0.5)
-    with pytest.raises(ValueError, match="unknown boundary tag 'cuff'; this mesh has: ends, sides"):
+    with pytest.raises(ValueError, match="unknown boundary tag 'cuff'; this mesh has: end, sides, start"):
         ShellModel(panel, material=MAT, thickness=0.01, supports=[Clamp("cuff")])
     square = dolfinx.mesh.create_unit_square(COMM, 2, 2)
     flat = meshes.SurfaceMesh(mesh=square, facet_tags=None, boundaries={})
