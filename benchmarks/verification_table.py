@@ -31,6 +31,7 @@ for k in (1.0, 2.0, 4.0):
         rows.extend(V.run_elastica(k=k, nx=nx, ny=ny))
 for n in (8, 16):
     rows.append(V.run_scordelis_lo(n=n))
+rows.append(V.run_scordelis_lo(n=16, half=True))
 arc = [V.run_arc_bending(nx=n) for n in (4, 8, 16)]
 rows.extend(arc)
 
