@@ -20,6 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .geometry import check_vectors as _vec
+
 __all__ = [
     "ContactDiagnostics",
     "contact_forces",
@@ -31,16 +33,6 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-
-
-def _vec(x: ArrayLike, name: str, n: int | None = None) -> FloatArray:
-    a = np.asarray(x, dtype=float)
-    if a.ndim != 2 or a.shape[1] != 3 or (n is not None and a.shape[0] != n):
-        want = "(N, 3)" if n is None else f"({n}, 3)"
-        raise ValueError(f"{name} must have shape {want}, got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name} must be finite, got NaN or inf")
-    return a
 
 
 def _field(x: ArrayLike, name: str, n: int) -> FloatArray:

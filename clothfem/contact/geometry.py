@@ -104,6 +104,18 @@ class UnionProjection(NamedTuple):
 # --------------------------------------------------------------------------------------------
 # validation
 # --------------------------------------------------------------------------------------------
+def check_vectors(x: ArrayLike, name: str, n: int | None = None) -> FloatArray:
+    """Return ``x`` as a finite (N, 3) float array (N = ``n`` if given) or raise a one-line
+    ``ValueError`` naming ``name``."""
+    a = np.asarray(x, dtype=float)
+    if a.ndim != 2 or a.shape[1] != 3 or (n is not None and a.shape[0] != n):
+        want = "(N, 3)" if n is None else f"({n}, 3)"
+        raise ValueError(f"{name} must have shape {want}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be finite, got NaN or inf")
+    return a
+
+
 def check_points(x: ArrayLike, *, name: str = "x") -> FloatArray:
     """Return ``x`` as a finite (N, 3) float array or raise a one-line ``ValueError``."""
     a = np.asarray(x, dtype=float)
