@@ -136,6 +136,7 @@ class ShellModel:
         self._build_directors()
         self._build_supports()
         self._build_forms(warp, quadrature)
+        self._Rw_at: np.ndarray | None = None  # state at which self._Rw was assembled
         self._build_transfer()
         self.update_director()
 
@@ -382,7 +383,11 @@ class ShellModel:
         self._G = G
 
     def update_director(self) -> None:
-        """d_A = d_A(theta_A) at every local node (owned and ghost); P from dd_A/dtheta_A."""
+        """d_A = d_A(theta_A) at every local node (owned and ghost); P from dd_A/dtheta_A.
+
+        Call it after changing ``u`` or ``theta`` by hand (it also drops the cached residual).
+        """
+        self._Rw_at = None
         th = self.theta.x.array.reshape(-1, 2)
         self.d.x.array[:] = rotation.director(self.basis, th).ravel()
         T, self._H = rotation.director_derivatives(self.basis[: self.n_owned], th[: self.n_owned])
@@ -416,6 +421,7 @@ class ShellModel:
         """Set the load factor and assemble the parts of the load that do not depend on the
         state (point forces, edge moments) into the external force vector."""
         self.lam.value = lam
+        self._Rw_at = None
         self._f_ext.zeroEntries()
         n = self.n_owned
         arr = self._f_ext.getArray()
@@ -427,23 +433,30 @@ class ShellModel:
             arr[3 * n :] += b.getArray(readonly=True)
             b.destroy()
 
+    def _assemble_Rw(self, x: PETSc.Vec) -> None:
+        """Set the state to ``x`` and assemble the (u, d) residual, unless both are already
+        at ``x`` (SNES asks for the Jacobian at the point whose residual it just had)."""
+        arr = x.getArray(readonly=True)
+        same = self._Rw_at is not None and np.array_equal(arr, self._Rw_at)
+        if self.comm.allreduce(same, op=MPI.LAND):  # collective decision
+            return
+        self.set_state(x)
+        with self._Rw.localForm() as loc:
+            loc.set(0.0)
+        fem_petsc.assemble_vector_block(self._Rw, self._R_forms, self._K_forms, bcs=[])
+        self._Rw_at = arr.copy()
+
     def residual(self, x: PETSc.Vec, f: PETSc.Vec) -> None:
         """f = R(x) in the (u, theta) layout, without support conditions."""
-        self.set_state(x)
+        self._assemble_Rw(x)
         Rw = self._Rw
-        with Rw.localForm() as loc:
-            loc.set(0.0)
-        fem_petsc.assemble_vector_block(Rw, self._R_forms, self._K_forms, bcs=[])
         self._P.multTranspose(Rw, f)
         f.axpy(-1.0, self._f_ext)
 
     def jacobian(self, x: PETSc.Vec, K: PETSc.Mat | None = None) -> PETSc.Mat:
         """K = P^T K_w P + G at ``x`` (created if ``K`` is None), without supports."""
-        self.set_state(x)
+        self._assemble_Rw(x)
         Rw = self._Rw
-        with Rw.localForm() as loc:
-            loc.set(0.0)
-        fem_petsc.assemble_vector_block(Rw, self._R_forms, self._K_forms, bcs=[])
         self._Kw.zeroEntries()
         fem_petsc.assemble_matrix_block(self._Kw, self._K_forms, bcs=[])
         self._Kw.assemble()
