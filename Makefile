@@ -7,7 +7,7 @@ export OMP_NUM_THREADS := 1
 MPIRUN := mpirun --allow-run-as-root --oversubscribe -n 2
 OUT ?= results
 
-.PHONY: env test test-serial test-mpi test-slow lint demo demo-rollup demo-body verification bench bench-blas clean
+.PHONY: env test test-serial test-mpi test-slow lint demo demo-rollup demo-body demo-contact verification bench bench-blas clean
 
 env: .venv/.clothfem-installed
 
@@ -40,6 +40,9 @@ demo-rollup: env
 
 demo-body: env
 	$(PY) demos/body_mocap.py --out $(OUT)/body
+
+demo-contact: env
+	$(PY) demos/contact_push.py --out $(OUT)/contact_push
 
 ## make verification: the README's shell verification table (results/verification.md)
 verification: env

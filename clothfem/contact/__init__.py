@@ -11,6 +11,10 @@ Sign conventions used throughout:
   ``+lam_n n``, on the body ``-lam_n n``.  Friction forces are forces on the fabric.
 * :func:`joint_torque` (Eq. 28) takes forces **on the body**.
 
+The FEM-coupled implicit solver (Lagrange multipliers with active-set iterations, Coulomb
+friction) is :mod:`clothfem.contact.lagrange`; import it explicitly (it needs dolfinx), so that
+``import clothfem.contact`` stays FEM-free.
+
 Ellipsoids are plain ``(c, Q, r)`` triples: centre (3,) m, axes as the columns of ``Q`` (local
 coordinates ``y = Q^T (x - c)``), radii (3,) m.
 """

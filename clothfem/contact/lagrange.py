@@ -1,0 +1,837 @@
+"""Implicit frictional contact of a fabric shell with rigid ellipsoids by Lagrange multipliers.
+
+Man & Swan (2007), Sec. 3.2, Eqs. 15-21, solved implicitly with the active-set ("trial and
+error") procedure described after Eq. 21: activate penetrating nodes, deactivate nodes whose
+multiplier turns tensile, iterate until the set stops changing.
+
+Formulation
+-----------
+Slave nodes are the fabric nodes (all nodes of the shell's ``u`` space, quadratic elements
+included); the master surface is the union of rigid ellipsoids given as ``(c, Q, r)`` triples
+(axes as **columns**; ``clothfem.body.Ellipsoid`` gives ``(e.centre, e.axes.T, e.radii)``).
+For an active node ``i`` the constraint is ``gap_i(x_i) = (x_i - p_i) . n_i = 0`` with the exact
+closest point ``p_i`` and outward normal ``n_i`` of
+:func:`~clothfem.contact.geometry.closest_point_union`.  Since ``d gap / d x = n`` for an exact
+projection, the constraint row is ``G_i = n_i^T`` on the three ``u`` dofs of node ``i``
+(Eq. 21 with a rigid master: the master dofs are prescribed, not unknowns).
+
+Per Newton iteration we solve the bordered (saddle-point) system
+
+    [ K + K_t        -(n + mu s) ] [du ]   [ -(R - G^T lam - f_t) ]
+    [ -G               0         ] [dlam] = [  gap                 ]
+
+``K`` the shell tangent, ``R`` its residual, ``lam`` the normal multipliers (force on the
+fabric ``+lam n``, on the body ``-lam n``) and ``f_t``/``K_t`` the friction force and its
+consistent tangent (below).  Why a bordered system and not a nodal rotation: it returns the
+multipliers as unknowns of the solve (no post-processing of reactions), keeps the model's
+``(u, theta)`` layout untouched, and one MUMPS factorisation of the small extra block costs
+nothing here.  The curvature of the constraint is in the tangent: ``d(lam n)/dx =
+lam W (I + gap W)^-1`` with ``W = P H P / |grad f|`` the Weingarten map of the ellipsoid at
+``p`` (``H`` the Hessian of Eq. 26).  Each Newton step is followed by a backtracking line search
+on ``|R - G^T lam - f_t|^2 + (E t)^2 |gap|^2`` (needed at stick/slip transitions and where the
+released fabric wrinkles); a pass that keeps stalling is abandoned early so that
+:meth:`LagrangeContact.advance` can halve the step.  The
+bordered matrix is assembled as one AIJ matrix from the CSR rows of ``K`` with columns
+renumbered to the layout ``[u, theta owned; lam owned]`` per rank; every constraint lives on
+the rank that owns its node, so all extra entries are local.
+
+Friction (only built when ``mu > 0``)
+-------------------------------------
+Regularised Coulomb law with a tangential penalty ``k_t`` and a return map (Wriggers,
+*Computational Contact Mechanics*, 2nd ed. 2006; Laursen & Simo 1993): the slip of node
+``i`` over the step is ``du = P_t (p_i - a_i)``, ``p_i`` its current closest point and ``a_i``
+the body material point it touched at the last converged step (body-local coordinates ``xi_i``
+carried with the body, ``c_k + Q_k xi_i``, and put back on the possibly resized surface);
+trial force ``f_tr = P_t f_old - k_t du`` and
+:func:`~clothfem.contact.friction.coulomb_return_map` (stick if ``|f_tr| <= mu lam``, else
+``f_t = mu lam f_tr/|f_tr|``).  Consistent tangent: stick ``K_t = k_t P_t``; slip
+``K_t = mu lam k_t / |f_tr| (I - s s^T) P_t`` and the extra coupling ``-mu s`` in the multiplier
+column (``s = f_tr / |f_tr|``), which makes the bordered matrix unsymmetric (MUMPS LU).  In full
+slip ``|f_t| = mu lam`` exactly whatever ``k_t``; ``k_t`` only sets the elastic (pre-sliding)
+slip ``|f_t| / k_t`` while sticking.  The frictional dissipation of a step is
+``sum mu lam |du_p|`` (plastic slip of the return map).
+
+Outputs (per owned node; scalars are reduced over ranks): normal multipliers, normals, gaps,
+friction forces, contact force on the fabric and on the body, contact pressure
+``lam / A_i`` with ``A_i`` lumped nodal areas of the current configuration (HRZ diagonal
+lumping), resultant, Eq. 28 torque, accumulated dissipation and KKT diagnostics.
+
+PETSc options: the linear solver has the prefix ``contact_lagrange_`` (default MUMPS LU);
+override with ``-contact_lagrange_pc_factor_mat_solver_type superlu_dist`` etc.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import dolfinx.fem.petsc as fem_petsc
+import numpy as np
+import scipy.sparse as sp
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+from numpy.typing import ArrayLike, NDArray
+from petsc4py import PETSc
+
+from ..shell.model import ShellModel
+from .forces import diagnostics, joint_torque
+from .friction import coulomb_return_map
+from .geometry import (
+    EllipsoidData,
+    _check_bodies,
+    closest_point_ellipsoid,
+    closest_point_union,
+)
+
+__all__ = [
+    "ContactDivergence",
+    "ContactState",
+    "ContactStepRecord",
+    "LagrangeContact",
+    "LagrangeContactParameters",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+class ContactDivergence(RuntimeError):
+    """Newton or the active-set iteration failed in a step; the state was restored."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class LagrangeContactParameters:
+    """Controls of :class:`LagrangeContact` (SI units).
+
+    mu: Coulomb friction coefficient (>= 0); 0 builds no friction terms at all.
+    tangential_penalty: k_t in N/m (> 0) of the regularised stick law; None means
+        ``100 * max(E1, E2) * t`` (the membrane stiffness scale of a node, times 100).
+    gap_tolerance: activation threshold in m (> 0): an inactive node is activated when its gap
+        is below ``-gap_tolerance``; None means ``1e-4 * thickness``.
+    multiplier_tolerance: relative deactivation threshold (in [0, 1)): an active node is
+        released when ``lam < -multiplier_tolerance * max|lam|``.
+    newton_rtol: Newton stops when the free-row residual drops below newton_rtol times its
+        largest value in the active-set pass (in (0, 1)), with max|gap| <= 1e-3 gap_tolerance.
+    newton_stol: ... or when ``max|du| <= newton_stol * L`` with L the mesh size (in (0, 1)).
+    max_newton: Newton iterations per active-set pass (>= 1).
+    max_active_set: active-set passes per step (>= 1).
+    prefix: PETSc options prefix of the bordered linear solve.
+    """
+
+    mu: float = 0.0
+    tangential_penalty: float | None = None
+    gap_tolerance: float | None = None
+    multiplier_tolerance: float = 1e-9
+    newton_rtol: float = 1e-9
+    newton_stol: float = 1e-11
+    max_newton: int = 50
+    max_active_set: int = 30
+    prefix: str = "contact_lagrange_"
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.mu) and self.mu >= 0):
+            raise ValueError(f"mu must be a finite friction coefficient >= 0, got {self.mu!r}")
+        for name in ("tangential_penalty", "gap_tolerance"):
+            v = getattr(self, name)
+            if v is not None and not (math.isfinite(v) and v > 0):
+                unit = "N/m" if name == "tangential_penalty" else "m"
+                raise ValueError(f"{name} must be None or a finite number > 0 {unit}, got {v!r}")
+        if not (math.isfinite(self.multiplier_tolerance) and 0 <= self.multiplier_tolerance < 1):
+            raise ValueError(
+                f"multiplier_tolerance must be in [0, 1), got {self.multiplier_tolerance!r}"
+            )
+        for name in ("newton_rtol", "newton_stol"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and 0 < v < 1):
+                raise ValueError(f"{name} must be in (0, 1), got {v!r}")
+        for name in ("max_newton", "max_active_set"):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and v >= 1):
+                raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+        if not (isinstance(self.prefix, str) and self.prefix and " " not in self.prefix):
+            raise ValueError(
+                f"prefix must be a non-empty PETSc options prefix, got {self.prefix!r}"
+            )
+
+
+@dataclass(frozen=True)
+class ContactStepRecord:
+    """One converged contact step (all values reduced over ranks).
+
+    n_active: active nodes; max_penetration: max(0, -min gap) in m over all nodes;
+    min_multiplier: smallest active lam in N (0 if none); complementarity: max|lam gap| in N m;
+    active_set_iterations: passes until the set stopped changing; newton_iterations: total;
+    n_stick / n_slip: active nodes sticking / slipping (0 at mu = 0); dissipation: frictional
+    dissipation of the step in J; total_normal_force: sum of lam in N; wall_time in s.
+    """
+
+    step: int
+    load_factor: float
+    n_active: int
+    max_penetration: float
+    min_multiplier: float
+    complementarity: float
+    active_set_iterations: int
+    newton_iterations: int
+    n_stick: int
+    n_slip: int
+    dissipation: float
+    total_normal_force: float
+    wall_time: float
+
+    def line(self) -> str:
+        return (
+            f"step {self.step:3d}  lam {self.load_factor:7.4f}  active {self.n_active:5d}  "
+            f"pen {self.max_penetration:9.2e} m  min lam {self.min_multiplier:9.2e} N  "
+            f"|lam gap| {self.complementarity:8.1e}  sets {self.active_set_iterations:2d}  "
+            f"newton {self.newton_iterations:3d}  stick/slip {self.n_stick}/{self.n_slip}  "
+            f"sum lam {self.total_normal_force:9.4g} N  {self.wall_time:6.2f} s"
+        )
+
+
+@dataclass(frozen=True)
+class ContactState:
+    """Contact state of the rank's **owned** nodes (arrays of length ``n_owned``).
+
+    x: current positions (m); gap: signed gap to the union (m, < 0 penetration); active: mask;
+    lam_n: normal multipliers (N, 0 off the active set); normal: outward body normal at the
+    closest point; friction: tangential friction force on the fabric (N); force_on_fabric:
+    ``lam_n n + friction``; force_on_body: its negative (use it in Eq. 28); area: lumped nodal
+    area of the current configuration (m^2); pressure: ``lam_n / area`` (Pa).
+    """
+
+    x: FloatArray
+    gap: FloatArray
+    active: NDArray[np.bool_]
+    lam_n: FloatArray
+    normal: FloatArray
+    friction: FloatArray
+    force_on_fabric: FloatArray
+    force_on_body: FloatArray
+    area: FloatArray
+    pressure: FloatArray
+
+
+class LagrangeContact:
+    """Frictional contact of a :class:`ShellModel` with a union of rigid, moving ellipsoids.
+
+    Parameters
+    ----------
+    model: the fabric shell (supports and loads as usual).
+    bodies: sequence of ``(c, Q, r)`` (centre m, axes as columns, radii m). They are copied into
+        arrays owned by this object; move the bodies with :meth:`set_pose` (in place).
+    params: :class:`LagrangeContactParameters`.
+    slaves: optional ``f(X) -> bool mask`` of reference node coordinates (shape (3, N), like
+        dolfinx locators) selecting the nodes that may touch; default all nodes.
+
+    Nodes whose three displacement components are all prescribed never enter the active set.
+    """
+
+    def __init__(
+        self,
+        model: ShellModel,
+        bodies: Sequence[EllipsoidData],
+        *,
+        params: LagrangeContactParameters = LagrangeContactParameters(),
+        slaves: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
+        if not isinstance(params, LagrangeContactParameters):
+            raise ValueError("params must be a LagrangeContactParameters instance")
+        self.model, self.params, self.comm = model, params, model.comm
+        self.bodies = [tuple(np.array(a, dtype=float) for a in b) for b in _check_bodies(bodies)]
+        n = model.n_owned
+        self.n = n
+        self.X = model.x_nodes[:n].copy()
+        mat = model.material
+        t = model.thickness
+        self.gap_tol = params.gap_tolerance if params.gap_tolerance is not None else 1e-4 * t
+        lo = self.X.min(axis=0) if n else np.full(3, np.inf)
+        hi = self.X.max(axis=0) if n else np.full(3, -np.inf)
+        self.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
+        self.comm.Allreduce(MPI.IN_PLACE, hi, op=MPI.MAX)
+        self.L = float(np.linalg.norm(hi - lo))
+        self.stiffness_scale = max(mat.E1, mat.E2) * t  # N/m
+        self.force_scale = self.stiffness_scale * self.L  # N
+        self.slave = np.ones(n, dtype=bool)
+        if slaves is not None:
+            self.slave = np.asarray(slaves(self.X.T.copy()), dtype=bool)[:n]
+        # state: multipliers on the active set (stored per node), friction history
+        self.active = np.zeros(n, dtype=bool)
+        self.lam = np.zeros(n)
+        self.step_count = 0
+        self.dissipation_total = 0.0
+        self._friction: _FrictionState | None = None
+        if params.mu > 0:
+            kt = params.tangential_penalty
+            kt = kt if kt is not None else 100.0 * max(mat.E1, mat.E2) * t
+            self._friction = _FrictionState(n, params.mu, kt)
+            self._friction.commit(self._positions(), self.bodies, np.zeros((n, 3)))
+        self._last_friction = np.zeros((n, 3))
+        self._build_solver()
+        self._build_area_forms()
+        self._K: PETSc.Mat | None = None
+
+    # ------------------------------------------------------------------ controls
+    @property
+    def friction(self) -> _FrictionState | None:
+        """Friction data (None when mu = 0: no friction objects are built)."""
+        return self._friction
+
+    def set_pose(
+        self,
+        k: int,
+        *,
+        centre: ArrayLike | None = None,
+        axes: ArrayLike | None = None,
+        radii: ArrayLike | None = None,
+    ) -> None:
+        """Move ellipsoid ``k`` in place: centre (3,) m, axes (3, 3) as columns, radii (3,) m."""
+        if not (isinstance(k, int | np.integer) and 0 <= k < len(self.bodies)):
+            raise ValueError(f"k must index a body in [0, {len(self.bodies)}), got {k!r}")
+        c, Q, r = self.bodies[k]
+        new = (
+            c if centre is None else centre,
+            Q if axes is None else axes,
+            r if radii is None else radii,
+        )
+        c2, Q2, r2 = _check_bodies([new])[0]
+        c[:], Q[:], r[:] = c2, Q2, r2
+
+    # ------------------------------------------------------------------ setup
+    def _build_solver(self) -> None:
+        ksp = PETSc.KSP().create(self.comm)
+        prefix = self.params.prefix
+        ksp.setOptionsPrefix(prefix)
+        opts = PETSc.Options()
+        defaults = {
+            "ksp_type": "preonly",  # one direct solve per Newton iteration
+            "pc_type": "lu",  # the bordered matrix is indefinite (zero multiplier block)
+            "pc_factor_mat_solver_type": "mumps",  # parallel LU with pivoting (serial and MPI)
+        }
+        for key, value in defaults.items():
+            if not opts.hasName(prefix + key):
+                opts.setValue(prefix + key, value)
+        ksp.setFromOptions()
+        self.ksp = ksp
+        self._ksp_sizes = None
+
+    def _build_area_forms(self) -> None:
+        m = self.model
+        mesh = m.mesh
+        self.S = fem.FunctionSpace(mesh, m.V.ufl_element().sub_elements()[0])
+        xs = self.S.tabulate_dof_coordinates()[: self.n]
+        if self.S.dofmap.index_map.size_local != self.n or not np.allclose(xs, self.X):
+            raise RuntimeError("scalar and vector spaces have different node layouts")
+        J = ufl.Jacobian(mesh)
+        g = ufl.grad(m.u)
+        a0 = ufl.as_vector([J[i, 0] for i in range(3)])
+        a1 = ufl.as_vector([J[i, 1] for i in range(3)])
+        c0, c1 = a0 + g * a0, a1 + g * a1
+        n0 = ufl.cross(a0, a1)
+        nc = ufl.cross(c0, c1)
+        ratio = ufl.sqrt(ufl.dot(nc, nc) / ufl.dot(n0, n0))  # current / reference area
+        dx = m.dx_full
+        w, v = ufl.TrialFunction(self.S), ufl.TestFunction(self.S)
+        self._mass_form = fem.form(ratio * w * v * dx)
+        self._area_form = fem.form(ratio * dx)
+        self._M = fem_petsc.create_matrix(self._mass_form)
+
+    # ------------------------------------------------------------------ geometry
+    def _positions(self) -> FloatArray:
+        u = self.model.u.x.array[: 3 * self.n].reshape(-1, 3)
+        return self.X + u
+
+    def lumped_area(self) -> FloatArray:
+        """HRZ-lumped nodal areas (m^2) of the current configuration, owned nodes (collective)."""
+        M = self._M
+        M.zeroEntries()
+        fem_petsc.assemble_matrix(M, self._mass_form)
+        M.assemble()
+        d = M.getDiagonal()
+        diag = d.getArray(readonly=True).copy()
+        total = self.comm.allreduce(fem.assemble_scalar(self._area_form), op=MPI.SUM)
+        sdiag = self.comm.allreduce(float(diag.sum()), op=MPI.SUM)
+        d.destroy()
+        return diag * (total / sdiag)
+
+    # ------------------------------------------------------------------ algebra
+    def _bordered(
+        self,
+        K: PETSc.Mat,
+        nodes: NDArray[np.intp],
+        col: FloatArray,
+        row: FloatArray,
+        kt_blocks: FloatArray | None,
+        bc_rows: NDArray[np.int32],
+    ) -> PETSc.Mat:
+        """[[K + Kt, C], [B, 0]] as one AIJ matrix: C (3 per active node) the multiplier
+        column, B the constraint row, both on the node's u dofs; bc rows set to identity."""
+        comm = self.comm
+        n5 = 5 * self.n
+        m = len(nodes)
+        ms = np.array(comm.allgather(m))
+        moff = np.concatenate([[0], np.cumsum(ms)])
+        kr = np.array(K.getOwnershipRanges())
+        ntot = int(kr[-1] + moff[-1])
+        r0 = int(kr[comm.rank] + moff[comm.rank])  # first global row of this rank
+        indptr, indices, data = K.getValuesCSR()
+        owner = np.searchsorted(kr, indices, side="right") - 1
+        new_cols = indices + moff[owner]
+        A = sp.csr_matrix((data, new_cols, indptr), shape=(n5, ntot))
+        lam_cols = r0 + n5 + np.arange(m)
+        urows = (3 * nodes[:, None] + np.arange(3)).ravel()
+        blocks = [
+            A,
+            sp.csr_matrix((col.ravel(), (urows, np.repeat(lam_cols, 3))), shape=(n5, ntot)),
+        ]
+        if kt_blocks is not None and m:
+            rr = np.repeat(urows.reshape(m, 3), 3, axis=1).ravel()
+            cc = np.tile(urows.reshape(m, 3), (1, 3)).ravel() + r0
+            blocks.append(sp.csr_matrix((kt_blocks.ravel(), (rr, cc)), shape=(n5, ntot)))
+        top = sum(blocks[1:], blocks[0]).tocsr()
+        if len(bc_rows):
+            keep = np.ones(n5)
+            keep[bc_rows] = 0.0
+            top = sp.diags(keep) @ top
+            eye = sp.csr_matrix((np.ones(len(bc_rows)), (bc_rows, bc_rows + r0)), shape=(n5, ntot))
+            top = (top + eye).tocsr()
+        bot = sp.csr_matrix(
+            (row.ravel(), (np.repeat(np.arange(m), 3), urows + r0)), shape=(m, ntot)
+        )
+        full = sp.vstack([top, bot]).tocsr()
+        full.sum_duplicates()
+        full.sort_indices()
+        B = PETSc.Mat().createAIJ(
+            size=((n5 + m, ntot), (n5 + m, ntot)),
+            csr=(
+                full.indptr.astype(PETSc.IntType),
+                full.indices.astype(PETSc.IntType),
+                full.data,
+            ),
+            comm=comm,
+        )
+        B.assemble()
+        return B
+
+    def _contact_terms(self, x: FloatArray, nodes: NDArray[np.intp], lam: FloatArray):
+        """Gap, normal and friction terms of the active nodes at positions ``x``."""
+        m = len(nodes)
+        if m:
+            pr = closest_point_union(x[nodes], self.bodies)
+            gap, nrm, body, point = pr.gap, pr.normal, pr.body, pr.point
+        else:
+            gap, nrm, body = np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=np.intp)
+            point = np.zeros((0, 3))
+        force = lam[:, None] * nrm
+        col = -nrm.copy()
+        # curvature of the constraint: d(lam n)/dx = lam W (I + gap W)^-1 P with W the
+        # Weingarten map of the body at p; its negative enters the tangent
+        blocks = -lam[:, None, None] * _weingarten(point, nrm, gap, body, self.bodies)
+        fr = None
+        if self._friction is not None:
+            fr = self._friction.evaluate(point, nodes, nrm, body, lam, self.bodies)
+            force = force + fr.force
+            col = col - fr.dforce_dlam
+            blocks = blocks + fr.tangent
+        kt_blocks = blocks
+        return gap, nrm, force, col, kt_blocks, fr
+
+    # ------------------------------------------------------------------ solve
+    def _evaluate(self, xv: PETSc.Vec, f: PETSc.Vec, nodes, lam, bc_rows, bc_vals, free):
+        """Residual of the bordered system at ``xv``: (r_u, gap, terms, |r_u free|, max|gap|,
+        max|bc error|), all norms reduced over ranks."""
+        n = self.n
+        self.model.residual(xv, f)
+        xa = xv.getArray(readonly=True)
+        x = self.X + xa[: 3 * n].reshape(-1, 3)
+        gap, nrm, force, col, kt_blocks, fr = self._contact_terms(x, nodes, lam)
+        r = f.getArray(readonly=True).copy()
+        urows = (3 * nodes[:, None] + np.arange(3)).ravel()
+        np.add.at(r, urows, -force.ravel())
+        r[bc_rows] = xa[bc_rows] - bc_vals
+        comm = self.comm
+        fnorm = math.sqrt(comm.allreduce(float(np.dot(r[free], r[free])), op=MPI.SUM))
+        gmax = comm.allreduce(float(np.max(np.abs(gap))) if len(gap) else 0.0, op=MPI.MAX)
+        bcmax = comm.allreduce(
+            float(np.max(np.abs(r[bc_rows]))) if len(bc_rows) else 0.0, op=MPI.MAX
+        )
+        # line-search merit: force residual and constraint violation (through the membrane
+        # stiffness scale of a node, N/m) in one norm
+        g2 = comm.allreduce(float(np.dot(gap, gap)), op=MPI.SUM)
+        merit = math.sqrt(fnorm**2 + self.stiffness_scale**2 * g2)
+        return r, gap, (nrm, col, kt_blocks, fr), fnorm, gmax, bcmax, merit
+
+    def _newton(self, xv: PETSc.Vec, nodes, lam, bc_rows, bc_vals):
+        """Newton on the bordered system with the active set ``nodes`` fixed, with a
+        backtracking line search on the merit of :meth:`_evaluate` (needed at stick/slip
+        transitions, where the return map makes the residual only piecewise smooth, and where
+        released fabric wrinkles).
+
+        Returns (ok, iterations, lam, last friction evaluation)."""
+        m, p = self.model, self.params
+        n = self.n
+        f = xv.duplicate()
+        free = np.ones(5 * n, dtype=bool)
+        free[bc_rows] = False
+        stol = p.newton_stol * self.L
+        atol = 1e-13 * self.force_scale
+        last_step = np.inf
+        r, gap, terms, fnorm, gmax, bcmax, merit = self._evaluate(
+            xv, f, nodes, lam, bc_rows, bc_vals, free
+        )
+        prev = [fnorm]
+        stalled = 0
+        for its in range(p.max_newton + 1):
+            nrm, col, kt_blocks, fr = terms
+            if not math.isfinite(fnorm):
+                return False, its, lam, fr
+            geom_ok = gmax <= 1e-3 * self.gap_tol and bcmax <= stol
+            # reference: the largest residual of the pass (the first one can be ~0 when only
+            # the gaps are violated, e.g. after the body moved)
+            fref = max(prev)
+            if geom_ok and (fnorm <= atol or (its > 0 and fnorm <= p.newton_rtol * fref)):
+                return True, its, lam, fr
+            if its > 0 and geom_ok and last_step <= stol:
+                return True, its, lam, fr
+            if its >= 2 and geom_ok and fnorm <= 1e-6 * fref and fnorm > 0.5 * prev[-2]:
+                return True, its, lam, fr  # round-off floor reached
+            if its == p.max_newton:
+                break
+            self._K = m.jacobian(xv, self._K)
+            B = self._bordered(self._K, nodes, col, -nrm, kt_blocks, bc_rows)
+            rhs, sol = B.createVecs()
+            ra = rhs.getArray()
+            ra[: 5 * n] = -r
+            ra[5 * n :] = gap
+            if B.getSizes() != self._ksp_sizes:  # the active set changed the system size
+                self.ksp.reset()
+                self.ksp.setFromOptions()
+                self._ksp_sizes = B.getSizes()
+            self.ksp.setOperators(B)
+            self.ksp.solve(rhs, sol)
+            ok_solve = self.ksp.getConvergedReason() > 0
+            s = sol.getArray(readonly=True).copy()
+            B.destroy()
+            rhs.destroy()
+            sol.destroy()
+            ok_solve = ok_solve and bool(np.all(np.isfinite(s)))
+            if not self.comm.allreduce(ok_solve, op=MPI.LAND):
+                return False, its, lam, fr
+            x0 = xv.getArray(readonly=True).copy()
+            lam0 = lam
+            alpha, used = 1.0, 1.0
+            for _ in range(8):  # backtracking: alpha = 1, 1/2, ..., 1/128
+                used = alpha
+                xv.getArray()[:] = x0 + alpha * s[: 5 * n]
+                lam = lam0 + alpha * s[5 * n :]
+                trial = self._evaluate(xv, f, nodes, lam, bc_rows, bc_vals, free)
+                if trial[6] <= (1.0 - 1e-4 * alpha) * merit or trial[3] <= atol:
+                    break
+                alpha *= 0.5
+            r, gap, terms, fnorm, gmax, bcmax, merit = trial
+            prev.append(fnorm)
+            last_step = used * self.comm.allreduce(
+                float(np.max(np.abs(s[: 3 * n]))) if n else 0.0, op=MPI.MAX
+            )
+            # give up early when the line search keeps stalling (the caller cuts the step)
+            stalled = stalled + 1 if used < 1.0 / 16.0 else 0
+            if stalled >= 4:
+                return False, its + 1, lam, terms[3]
+        return False, its, lam, terms[3]
+
+    def solve_step(self, lam_load: float) -> ContactStepRecord:
+        """Solve the static equilibrium with contact at load factor ``lam_load`` and the current
+        body poses, starting from the last converged state.
+
+        Raises :class:`ContactDivergence` (state restored) if Newton or the active set fails.
+        """
+        t0 = time.perf_counter()
+        m, p = self.model, self.params
+        n = self.n
+        saved_u, saved_t = m.u.x.array.copy(), m.theta.x.array.copy()
+        saved_active, saved_lam = self.active.copy(), self.lam.copy()
+        m.set_load_factor(lam_load)
+        bc_rows, bc_vals = m.bc_rows_and_values(lam_load)
+        fixed = np.zeros(3 * n, dtype=int)
+        ub = bc_rows[bc_rows < 3 * n]
+        fixed[ub] = 1
+        can_touch = self.slave & (fixed.reshape(-1, 3).sum(axis=1) < 3)
+        xv = m.create_vector()
+        m.get_state(xv)
+        xv.getArray()[bc_rows] = bc_vals
+        active = self.active & can_touch
+        # predictor: activate the nodes that the prescribed motions made penetrate
+        x0 = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
+        gap0 = closest_point_union(x0, self.bodies).gap if n else np.zeros(0)
+        active |= can_touch & (gap0 < -self.gap_tol)
+        lam_nodes = np.where(active, self.lam, 0.0)
+        newton_total, sets = 0, 0
+        fr = None
+        while True:
+            sets += 1
+            nodes = np.flatnonzero(active)
+            ok, its, lam_a, fr = self._newton(xv, nodes, lam_nodes[nodes], bc_rows, bc_vals)
+            newton_total += its
+            if not ok:
+                self._restore(saved_u, saved_t, saved_active, saved_lam)
+                raise ContactDivergence(
+                    f"Newton failed at load factor {lam_load:.6g} in active-set pass {sets} "
+                    f"({len(nodes)} active nodes on rank {self.comm.rank})"
+                )
+            lam_nodes[:] = 0.0
+            lam_nodes[nodes] = lam_a
+            x = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
+            gap = closest_point_union(x, self.bodies).gap if n else np.zeros(0)
+            lam_max = self.comm.allreduce(
+                float(np.max(np.abs(lam_a))) if len(lam_a) else 0.0, op=MPI.MAX
+            )
+            ltol = p.multiplier_tolerance * lam_max
+            drop = active & (lam_nodes < -ltol)
+            add = ~active & can_touch & (gap < -self.gap_tol)
+            changes = self.comm.allreduce(int(drop.sum() + add.sum()), op=MPI.SUM)
+            if changes == 0:
+                break
+            if sets >= p.max_active_set:
+                self._restore(saved_u, saved_t, saved_active, saved_lam)
+                raise ContactDivergence(
+                    f"active set still changing after {sets} passes at load factor "
+                    f"{lam_load:.6g} ({changes} changes)"
+                )
+            active = (active & ~drop) | add
+            lam_nodes[drop] = 0.0
+        # commit
+        m.set_state(xv)
+        self.active, self.lam = active, lam_nodes
+        self.step_count += 1
+        n_stick = n_slip = 0
+        diss = 0.0
+        friction = np.zeros((n, 3))
+        if self._friction is not None and fr is not None:
+            friction[nodes] = fr.force
+            n_stick = self.comm.allreduce(int(fr.stick.sum()), op=MPI.SUM)
+            n_slip = self.comm.allreduce(int((~fr.stick).sum()), op=MPI.SUM)
+            diss = self.comm.allreduce(float(fr.dissipation.sum()), op=MPI.SUM)
+            self._friction.commit(x, self.bodies, friction)
+        self._last_friction = friction
+        self.dissipation_total += diss
+        d = diagnostics(gap, lam_nodes, active=active)
+        n_act = self.comm.allreduce(d.n_active, op=MPI.SUM)
+        pen = self.comm.allreduce(d.max_penetration, op=MPI.MAX)
+        lmin = self.comm.allreduce(d.min_multiplier if d.n_active else np.inf, op=MPI.MIN)
+        comp = self.comm.allreduce(d.complementarity, op=MPI.MAX)
+        total = self.comm.allreduce(float(lam_nodes.sum()), op=MPI.SUM)
+        return ContactStepRecord(
+            self.step_count,
+            float(lam_load),
+            n_act,
+            pen,
+            lmin if n_act else 0.0,
+            comp,
+            sets,
+            newton_total,
+            n_stick,
+            n_slip,
+            diss,
+            total,
+            time.perf_counter() - t0,
+        )
+
+    def advance(
+        self,
+        lam_load: float,
+        *,
+        poses: dict[int, tuple[ArrayLike | None, ArrayLike | None, ArrayLike | None]] | None = None,
+        max_cutbacks: int = 6,
+        on_step: Callable[[ContactStepRecord], None] | None = None,
+    ) -> list[ContactStepRecord]:
+        """Go from the current load factor and poses to ``lam_load`` and the target ``poses``
+        ({k: (centre, axes, radii)}, None entries unchanged) in sub-steps, halving the
+        sub-step after a failed one (at most ``max_cutbacks`` halvings in a row) and doubling
+        it after an easy one. Centres, radii and the load factor are interpolated linearly,
+        axes by spherical linear interpolation. Returns the records of the sub-steps.
+
+        Raises :class:`ContactDivergence` (state restored to the last converged sub-step).
+        """
+        if not (isinstance(max_cutbacks, int) and max_cutbacks >= 0):
+            raise ValueError(f"max_cutbacks must be an integer >= 0, got {max_cutbacks!r}")
+        from scipy.spatial.transform import Rotation, Slerp
+
+        lam0 = float(self.model.lam.value)
+        starts, ends, slerps = {}, {}, {}
+        for k, (c, Q, r) in (poses or {}).items():
+            if not (isinstance(k, int | np.integer) and 0 <= k < len(self.bodies)):
+                raise ValueError(f"poses keys must index bodies in [0, {len(self.bodies)})")
+            c0, Q0, r0 = (a.copy() for a in self.bodies[k])
+            c1 = c0 if c is None else np.asarray(c, dtype=float)
+            Q1 = Q0 if Q is None else np.asarray(Q, dtype=float)
+            r1 = r0 if r is None else np.asarray(r, dtype=float)
+            _check_bodies([(c1, Q1, r1)])
+            starts[k], ends[k] = (c0, Q0, r0), (c1, Q1, r1)
+            if np.linalg.det(Q0) > 0 and np.linalg.det(Q1) > 0:
+                slerps[k] = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([Q0, Q1])))
+
+        def place(frac: float) -> None:
+            for k in starts:
+                (c0, Q0, r0), (c1, Q1, r1) = starts[k], ends[k]
+                Q = slerps[k](frac).as_matrix() if k in slerps else (Q0 if frac < 1 else Q1)
+                self.set_pose(k, centre=c0 + frac * (c1 - c0), axes=Q, radii=r0 + frac * (r1 - r0))
+
+        done, h, cuts, records = 0.0, 1.0, 0, []
+        while done < 1.0 - 1e-12:
+            trial = min(1.0, done + h)
+            place(trial)
+            try:
+                rec = self.solve_step(lam0 + trial * (lam_load - lam0))
+            except ContactDivergence:
+                place(done)
+                cuts += 1
+                if cuts > max_cutbacks:
+                    raise
+                h *= 0.5
+                continue
+            records.append(rec)
+            if on_step is not None:
+                on_step(rec)
+            done, cuts = trial, 0
+            if rec.newton_iterations <= 10 * rec.active_set_iterations:
+                h *= 2.0
+        return records
+
+    def _restore(self, u, th, active, lam) -> None:
+        m = self.model
+        m.u.x.array[:] = u
+        m.theta.x.array[:] = th
+        m.update_director()
+        self.active, self.lam = active, lam
+
+    # ------------------------------------------------------------------ outputs
+    def state(self) -> ContactState:
+        """Contact state of the owned nodes at the last converged step (collective: areas)."""
+        n = self.n
+        x = self._positions()
+        pr = closest_point_union(x, self.bodies) if n else None
+        gap = pr.gap if n else np.zeros(0)
+        normal = np.zeros((n, 3))
+        normal[self.active] = pr.normal[self.active]
+        lam = np.where(self.active, self.lam, 0.0)
+        fric = self._last_friction
+        f = lam[:, None] * normal + fric
+        area = self.lumped_area()
+        return ContactState(
+            x, gap, self.active.copy(), lam, normal, fric.copy(), f, -f, area, lam / area
+        )
+
+    def resultant(self) -> FloatArray:
+        """Resultant contact force on the body in N (sum over all ranks), (3,)."""
+        s = self.state()
+        return self.comm.allreduce(s.force_on_body.sum(axis=0), op=MPI.SUM)
+
+    def torque(self, joint: ArrayLike, *, nodes: Callable[[np.ndarray], np.ndarray] | None = None):
+        """Eq. 28 torque (N m) the fabric exerts on the body about ``joint``, over the nodes
+        selected by ``nodes(X)`` (reference coordinates, shape (3, N); all nodes if None)."""
+        s = self.state()
+        sel = None if nodes is None else np.asarray(nodes(self.X.T.copy()), dtype=bool)
+        tau = joint_torque(s.x, s.force_on_body, joint, nodes=sel) if self.n else np.zeros(3)
+        return self.comm.allreduce(tau, op=MPI.SUM)
+
+    def reactions(self) -> tuple[NDArray[np.int32], FloatArray]:
+        """Support reactions at the constrained rows (local (u, theta) layout) in N: the force
+        the supports exert on the fabric, ``R(x) - f_contact`` at those rows (collective)."""
+        m = self.model
+        rows, _ = m.bc_rows_and_values(float(m.lam.value))
+        xv = m.create_vector()
+        m.get_state(xv)
+        f = xv.duplicate()
+        m.residual(xv, f)
+        r = f.getArray(readonly=True).copy()
+        s_force = np.where(self.active, self.lam, 0.0)
+        x = self._positions()
+        if self.n:
+            nrm = closest_point_union(x, self.bodies).normal
+            fc = s_force[:, None] * nrm * self.active[:, None] + self._last_friction
+            r[: 3 * self.n] -= fc.ravel()
+        return rows, r[rows]
+
+
+def _weingarten(point, nrm, gap, body, bodies) -> FloatArray:
+    """d n / d x (N, 3, 3) of the exact projection onto the ellipsoids ``body`` at ``point``:
+    ``W (I + gap W)^-1`` with ``W = P H P / |grad f|`` (H the Hessian of Eq. 26)."""
+    m = len(point)
+    out = np.zeros((m, 3, 3))
+    if m == 0:
+        return out
+    P = np.eye(3)[None] - nrm[:, :, None] * nrm[:, None, :]
+    for k, (c, Q, r) in enumerate(bodies):
+        sel = np.flatnonzero(body == k)
+        if sel.size == 0:
+            continue
+        H = 2.0 * (Q / r**2) @ Q.T
+        grad = 2.0 * ((point[sel] - c) @ Q / r**2) @ Q.T
+        gn = np.linalg.norm(grad, axis=1)
+        W = np.einsum("nij,jk,nkl->nil", P[sel], H, P[sel]) / gn[:, None, None]
+        A = np.eye(3)[None] + gap[sel, None, None] * W
+        out[sel] = np.linalg.solve(A, W)
+    return out
+
+
+class _FrictionEval:
+    """Friction at the active nodes for one Newton iterate (internal)."""
+
+    def __init__(self, force, tangent, dforce_dlam, stick, dissipation):
+        self.force, self.tangent, self.dforce_dlam = force, tangent, dforce_dlam
+        self.stick, self.dissipation = stick, dissipation
+
+
+class _FrictionState:
+    """History of the regularised Coulomb law: body-local contact points and old forces.
+
+    Only created when mu > 0.
+    """
+
+    def __init__(self, n: int, mu: float, kt: float) -> None:
+        self.mu, self.kt = mu, kt
+        self.xi = np.zeros((n, 3))  # body-local coordinates of the last contact point
+        self.body = np.full(n, -1, dtype=np.intp)
+        self.force_old = np.zeros((n, 3))
+
+    def commit(self, x: FloatArray, bodies, force: FloatArray) -> None:
+        if len(x) == 0:
+            return
+        pr = closest_point_union(x, bodies)
+        self.body[:] = pr.body
+        for k, (c, Q, _) in enumerate(bodies):
+            sel = pr.body == k
+            self.xi[sel] = (pr.point[sel] - c) @ Q
+        self.force_old[:] = force
+
+    def evaluate(self, point, nodes, nrm, body, lam, bodies) -> _FrictionEval:
+        m = len(nodes)
+        P = np.eye(3)[None] - nrm[:, :, None] * nrm[:, None, :]
+        anchor = np.empty((m, 3))
+        same = self.body[nodes] == body
+        for k, (c, Q, r) in enumerate(bodies):
+            sel = np.flatnonzero(body == k)
+            if sel.size:
+                # the body material point touched at the last converged step, carried with
+                # the body and put back on its (possibly resized) surface
+                moved = c + self.xi[nodes[sel]] @ Q.T
+                anchor[sel] = closest_point_ellipsoid(moved, c, Q, r).point
+        du = np.einsum("nij,nj->ni", P, point - anchor)
+        du[~same] = 0.0
+        f_old = np.where(same[:, None], self.force_old[nodes], 0.0)
+        trial = np.einsum("nij,nj->ni", P, f_old) - self.kt * du
+        lam_pos = np.maximum(lam, 0.0)
+        rm = coulomb_return_map(lam_pos, trial, self.mu, penalty=self.kt)
+        tangent = self.kt * P.copy()
+        dlam = np.zeros((m, 3))
+        slip = ~rm.stick
+        if np.any(slip):
+            mag = np.linalg.norm(trial[slip], axis=1)
+            s = trial[slip] / np.maximum(mag, 1e-300)[:, None]
+            proj = np.eye(3)[None] - s[:, :, None] * s[:, None, :]
+            fac = self.mu * lam_pos[slip] * self.kt / np.maximum(mag, 1e-300)
+            tangent[slip] = fac[:, None, None] * np.einsum("nij,njk->nik", proj, P[slip])
+            dlam[slip] = np.where((lam[slip] > 0)[:, None], self.mu * s, 0.0)
+        return _FrictionEval(rm.force, tangent, dlam, rm.stick, rm.dissipation)
