@@ -134,9 +134,25 @@ def test_bad_input_one_line_errors(panel):
         FabricMaterial(E1=4.0, E2=1.0, G12=1.0, nu12=2.5)
     with pytest.raises(ValueError, match=r"material nu must be in \(-1, 0.5\)"):
         FabricMaterial.isotropic(E=1.0, nu=0.5)
-    with pytest.raises(ValueError, match="unknown boundary tag 'cuff'; this mesh has: end, sides, start"):
+    with pytest.raises(
+        ValueError, match="unknown boundary tag 'cuff'; this mesh has: end, sides, start"
+    ):
         ShellModel(panel, material=MAT, thickness=0.01, supports=[Clamp("cuff")])
     square = dolfinx.mesh.create_unit_square(COMM, 2, 2)
     flat = meshes.SurfaceMesh(mesh=square, facet_tags=None, boundaries={})
     with pytest.raises(ValueError, match="surface mesh in 3-D"):
         ShellModel(flat, material=MAT, thickness=0.01)
+
+
+@pytest.mark.serial
+@pytest.mark.parametrize("alpha, zero_modes", [(0.0, 7), (1e-3, 6)])
+def test_zero_energy_modes_of_a_free_tube(alpha, zero_modes):
+    """6 rigid modes; selective reduced integration adds one spurious mode, which the
+    membrane stabilization removes (dense eigenvalues, one rank)."""
+    from clothfem.shell import Quadrature
+
+    sm = meshes.cylinder(COMM, radius=0.06, length=0.2, n_around=8, n_along=4)
+    model = ShellModel(sm, material=MAT, thickness=1e-3, quadrature=Quadrature(stabilization=alpha))
+    A = model.jacobian(model.create_vector()).convert("dense").getDenseArray()
+    w = np.linalg.eigvalsh(0.5 * (A + A.T))
+    assert int(np.sum(w < 1e-12 * w.max())) == zero_modes
