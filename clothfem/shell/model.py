@@ -178,13 +178,14 @@ class ShellModel:
         n = ufl.cross(
             ufl.as_vector([J[i, 0] for i in range(3)]), ufl.as_vector([J[i, 1] for i in range(3)])
         )
-        expr = fem.Expression(n / ufl.sqrt(ufl.dot(n, n)), V.element.interpolation_points())
-        n_cells = mesh.topology.index_map(2).size_local
-        cells = np.arange(n_cells, dtype=np.int32)
-        values = expr.eval(cells).reshape(n_cells, -1, 3)
-        dofs = V.dofmap.list.array.reshape(-1, values.shape[1])[:n_cells]
+        points = V.element.interpolation_points()
+        expr = fem.Expression(n / ufl.sqrt(ufl.dot(n, n)), points)
+        n_cells = mesh.topology.index_map(2).size_local  # may be 0 on a rank
         acc = np.zeros((self.n_local, 3))
-        np.add.at(acc, dofs.ravel(), values.reshape(-1, 3))
+        if n_cells:
+            values = expr.eval(np.arange(n_cells, dtype=np.int32)).reshape(n_cells, -1, 3)
+            dofs = V.dofmap.list.array.reshape(-1, len(points))[:n_cells]
+            np.add.at(acc, dofs.ravel(), values.reshape(-1, 3))
         self.D.x.array[:] = acc.ravel()
         self.D.x.scatter_reverse(la.ScatterMode.add)
         self.D.x.scatter_forward()
