@@ -137,7 +137,6 @@ def test_generalized_alpha_frequency_and_decay():
     assert recs[-1].dissipation == pytest.approx(E0 - total[-1], rel=1e-6)
 
 
-@pytest.mark.slow
 def test_first_frequency_explicit():
     """Central difference with the lumped mass (rotary inertia scaled by 100, which keeps
     omega_max at the membrane limit): first frequency within 1 %."""
