@@ -7,7 +7,7 @@ export OMP_NUM_THREADS := 1
 MPIRUN := mpirun --allow-run-as-root --oversubscribe -n 2
 OUT ?= results
 
-.PHONY: env test test-serial test-mpi test-slow lint demo demo-rollup demo-body demo-contact verification bench bench-blas clean
+.PHONY: env test test-serial test-mpi test-slow lint demo demo-rollup demo-body demo-contact verification bench bench-blas bench-stiff clean
 
 env: .venv/.clothfem-installed
 
@@ -53,6 +53,10 @@ bench: bench-blas
 
 bench-blas: env
 	$(PY) benchmarks/blas.py
+
+## make bench-stiff: the stiff/extreme sleeve cases of docs/stiff_cases.md (~15 min)
+bench-stiff: env
+	$(PY) benchmarks/stiff_cases.py --out $(OUT)/stiff
 
 clean:
 	rm -rf $(OUT) .pytest_cache

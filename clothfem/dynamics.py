@@ -522,6 +522,24 @@ class LinearSystem:
         x.setArray(np.sin(7.1 * np.arange(r0, r1) + 0.3))
 
 
+def rotation_note(s) -> str:
+    """A diagnosis to append to a failure message when some nodal director rotation is near
+    pi, where the total-rotation parametrisation of :mod:`clothfem.shell.rotation` is
+    singular (dd/dtheta loses rank and the dropped inertia terms stop being small). Planar
+    rotations pass pi without harm, so this explains failures rather than forbidding them."""
+    if not isinstance(s, ShellSystem):
+        return ""
+    n = s.n
+    th = s.model.theta.x.array[: 2 * n].reshape(n, 2)
+    worst = s.comm.allreduce(float(np.hypot(th[:, 0], th[:, 1]).max(initial=0.0)), op=MPI.MAX)
+    if math.isfinite(worst) and abs(worst - math.pi) > 0.15 * math.pi:
+        return ""
+    return (
+        f"; a nodal director rotation is at |theta| = {worst:.3f} rad, near the singularity at "
+        "pi of the total-rotation parametrisation"
+    )
+
+
 def _as_system(obj) -> ShellSystem | LinearSystem:
     return ShellSystem(obj) if isinstance(obj, ShellModel) else obj
 
@@ -891,6 +909,7 @@ def integrate_implicit(
                     f"Newton failed at t = {t:.6g} with dt = {h_try / stepping.cut:.3g}: next dt "
                     f"{h_try:.3g} below dt_min {stepping.min_step:.3g} after {cutbacks} cut-backs "
                     f"(last residual {r1:.3e}); {len(records)} accepted steps were delivered"
+                    + rotation_note(s)
                 )
         t += h_try
         step += 1
@@ -1173,7 +1192,12 @@ def integrate_explicit(
         ra = -r.getArray(readonly=True)
         if damping.active:
             ra = ra - _damp(vpred)
-        aa = s.lumped_solve(ra)
+        try:
+            aa = s.lumped_solve(ra)
+        except np.linalg.LinAlgError as exc:
+            raise DynamicsDivergence(
+                "explicit: the lumped rotary mass became singular" + rotation_note(s)
+            ) from exc
         rows, _ = s.bc(lam)
         aa[rows] = 0.0
         a.setArray(aa)
@@ -1228,7 +1252,9 @@ def integrate_explicit(
         s.commit(x)  # (free for the shell: accel() left its state at x)
         K, U, W, Wd, diss = energy.advance(xo, x, v, a, lam, h)
         if not math.isfinite(K + U):
-            raise FloatingPointError(f"explicit integration blew up at t = {t:.6g} (dt = {h:.4g})")
+            raise FloatingPointError(
+                f"explicit integration blew up at t = {t:.6g} (dt = {h:.4g})" + rotation_note(s)
+            )
         rec = DynamicStep(
             step, t, h, lam, 0, 0.0, 0.0, 0, K, U, W, Wd, diss, time.perf_counter() - t0
         )
