@@ -374,6 +374,26 @@ class ShellSystem:
             self._blocks_at = th.copy()
         return self._blocks
 
+    def rebase(self, x: PETSc.Vec, v: PETSc.Vec, a: PETSc.Vec, *, threshold: float) -> None:
+        """Re-base the model's strongly rotated nodes (:meth:`ShellModel.rebase`) at the
+        committed state ``x`` and express the rotation rates ``v`` and accelerations ``a`` in
+        the new bases through the director rate, d' = T(theta) theta' (the second-derivative
+        term of a is neglected, as the gyroscopic inertia is)."""
+        m, n = self.model, self.n
+        th = m.theta.x.array[: 2 * n].reshape(n, 2)
+        T, _ = rotation.director_derivatives(m.basis[:n], th)
+        va, aa = v.getArray()[3 * n :].reshape(n, 2), a.getArray()[3 * n :].reshape(n, 2)
+        d_rate = np.einsum("nka,na->nk", T, va)
+        d_acc = np.einsum("nka,na->nk", T, aa)
+        nodes = m.rebase(threshold=threshold)
+        own = nodes[nodes < n]
+        if len(own):
+            e1, e2 = m.basis[own, 0], m.basis[own, 1]  # dd/dtheta at 0: (-e2, e1)
+            for arr, rate in ((va, d_rate), (aa, d_acc)):
+                arr[own, 0] = -np.einsum("nk,nk->n", e2, rate[own])
+                arr[own, 1] = np.einsum("nk,nk->n", e1, rate[own])
+            x.getArray()[3 * n :].reshape(n, 2)[own] = 0.0
+
     def lumped_solve(self, f: np.ndarray) -> np.ndarray:
         """M_L^{-1} f (local owned arrays) at the current state."""
         n = self.n
@@ -856,6 +876,7 @@ def integrate_implicit(
     velocity: PETSc.Vec | None = None,
     on_step: Callable[[DynamicStep], None] | None = None,
     prefix: str = "dyn_",
+    rebase: float | None = 0.5,
 ) -> list[DynamicStep]:
     """Integrate from t = 0 (displacement: the system's current state; velocity:
     ``velocity`` or zero; acceleration from the balance at t = 0) to ``stepping.t_end``.
@@ -918,6 +939,9 @@ def integrate_implicit(
         st.x.copy(st.xn)
         st.v1.copy(st.vn)
         st.a1.copy(st.an)
+        if rebase is not None and isinstance(s, ShellSystem):
+            s.rebase(st.xn, st.vn, st.an, threshold=rebase)
+            st.xn.copy(st.x)
         lam_n = lam1
         rec = DynamicStep(
             step, t, h_try, lam1, its, r0, r1, cutbacks, K, U, W, Wd, diss, time.perf_counter() - t0
@@ -1136,6 +1160,7 @@ def integrate_explicit(
     safety: float = 0.9,
     stable: StableStep | None = None,
     contact=None,
+    rebase: float | None = 0.5,
 ) -> tuple[list[DynamicStep], StableStep]:
     """Central difference (velocity Verlet) with the lumped mass, fixed step.
 
@@ -1251,6 +1276,8 @@ def integrate_explicit(
         a_new.destroy()
         s.commit(x)  # (free for the shell: accel() left its state at x)
         K, U, W, Wd, diss = energy.advance(xo, x, v, a, lam, h)
+        if rebase is not None and isinstance(s, ShellSystem):
+            s.rebase(x, v, a, threshold=rebase)
         if not math.isfinite(K + U):
             raise FloatingPointError(
                 f"explicit integration blew up at t = {t:.6g} (dt = {h:.4g})" + rotation_note(s)

@@ -188,12 +188,15 @@ def solve_static(
     solver: NewtonSolver | None = None,
     on_step: Callable[[StepRecord], None] | None = None,
     targets: np.ndarray | None = None,
+    rebase: float | None = 0.5,
 ) -> list[StepRecord]:
     """Drive the load factor from 0 to 1 (or through ``targets``, increasing values that
     the stepping must hit exactly); returns the converged step records.
 
     ``on_step`` is called after each converged step (write results there: they survive a
     later failure). Raises :class:`SolverDivergence` below ``stepping.min_increment``.
+    ``rebase``: after each converged step, nodes rotated by more than this [rad] get a new
+    fibre basis on their current director (:meth:`ShellModel.rebase`); None disables it.
     """
     solver = solver or NewtonSolver(model)
     targets = np.array([1.0]) if targets is None else np.asarray(targets, dtype=float)
@@ -224,6 +227,8 @@ def solve_static(
                 trial = lam + inc
             lam = trial
             step += 1
+            if rebase is not None:
+                model.rebase(threshold=rebase)
             saved_u[:] = model.u.x.array
             saved_t[:] = model.theta.x.array
             rec = StepRecord(step, lam, its, r0, r1, cutbacks, time.perf_counter() - t0)

@@ -202,10 +202,18 @@ class ShellModel:
         for s in self.supports:
             if isinstance(s, Symmetry):
                 preferred[self._node_mask(s.where)] = np.eye(3)[s.axis]
-        has_pref = ~np.isnan(preferred[:, 0])
-        self.basis = rotation.fibre_basis(normals)
-        if has_pref.any():
-            self.basis[has_pref] = rotation.fibre_basis(normals[has_pref], preferred[has_pref])
+        self._preferred = preferred  # symmetry-plane normals to align e1 with (NaN: none)
+        self.basis = self._fibre_basis(normals, np.arange(self.n_local))
+
+    def _fibre_basis(self, directors: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+        """Hughes' fibre bases of ``nodes`` around ``directors``, e1 aligned with a symmetry
+        plane normal where a Symmetry support asks for it."""
+        pref = self._preferred[nodes]
+        has = ~np.isnan(pref[:, 0])
+        out = rotation.fibre_basis(directors)
+        if has.any():
+            out[has] = rotation.fibre_basis(directors[has], pref[has])
+        return out
 
     # ------------------------------------------------------------------ supports
     def _build_supports(self) -> None:
@@ -245,15 +253,11 @@ class ShellModel:
                     self._add_bc(rows, fn)
                 if s.rotation is not None:
                     rows = (nu + 2 * nodes[:, None] + np.arange(2)).ravel()
-                    basis, D0, omega = (
-                        self.basis[nodes],
-                        self.D.x.array.reshape(-1, 3)[nodes],
-                        np.array(s.rotation),
-                    )
+                    D0, omega = self.D.x.array.reshape(-1, 3)[nodes], np.array(s.rotation)
 
-                    def fn(lam, basis=basis, D0=D0, omega=omega):
+                    def fn(lam, nodes=nodes, D0=D0, omega=omega):  # current basis: see rebase()
                         Rm = rotation.rotation_matrix((lam * omega)[None, :])[0]
-                        return rotation.rotation_from_director(basis, D0 @ Rm.T).ravel()
+                        return rotation.rotation_from_director(self.basis[nodes], D0 @ Rm.T).ravel()
 
                     self._add_bc(rows, fn)
 
@@ -414,6 +418,24 @@ class ShellModel:
         self._P_data[3 * n :] = T.reshape(-1)  # rows (node, k), columns a
         self._P.setValuesCSR(self._P_indptr, self._P_indices, self._P_data)
         self._P.assemble()
+
+    def rebase(self, *, threshold: float = 0.5) -> np.ndarray:
+        """Re-base the fibre basis of every node with |theta| > ``threshold`` [rad] on its
+        current director and set its rotation to zero; the director, the strains and the
+        energy are unchanged. This keeps the total-rotation parametrisation of Eqs. 7-9 away
+        from its singularity at |theta| = pi (folding fabric). Moment loads then do work on
+        the rotation since the last re-basing. Returns the re-based local nodes (owned and
+        ghost; the decision uses ghost-updated rotations, so ranks agree)."""
+        th = self.theta.x.array.reshape(-1, 2)
+        nodes = np.flatnonzero(np.hypot(th[:, 0], th[:, 1]) > threshold)
+        if len(nodes):
+            d = self.d.x.array.reshape(-1, 3)[nodes]
+            self.basis[nodes] = self._fibre_basis(d, nodes)
+            th[nodes] = 0.0
+            for k, E in enumerate(self._fibre_e):
+                E.x.array.reshape(-1, 3)[nodes] = self.basis[nodes, k]
+        self.update_director()  # collective (assembles P): every rank calls it
+        return nodes
 
     def create_vector(self) -> PETSc.Vec:
         """A vector of the (u, theta) system."""

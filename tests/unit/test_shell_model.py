@@ -156,3 +156,39 @@ def test_zero_energy_modes_of_a_free_tube(alpha, zero_modes):
     A = model.jacobian(model.create_vector()).convert("dense").getDenseArray()
     w = np.linalg.eigvalsh(0.5 * (A + A.T))
     assert int(np.sum(w < 1e-12 * w.max())) == zero_modes
+
+
+def test_rebase_keeps_the_configuration(panel):
+    """Re-basing strongly rotated nodes on their current directors changes the unknowns
+    (theta -> 0) but not the configuration: same directors, energy and u-residual, and a
+    consistent Jacobian afterwards."""
+    model = ShellModel(panel, material=MAT, thickness=0.01, loads=[Gravity()])
+    model.set_load_factor(1.0)
+    x = _random_state(model, 1.0, 7)  # |theta| up to ~3 rad
+    model.set_state(x)
+    d0, e0 = model.d.x.array.copy(), model.strain_energy()
+    f0 = x.duplicate()
+    model.residual(x, f0)
+    n = model.n_owned
+    nodes = model.rebase(threshold=0.5)
+    assert COMM.allreduce(len(nodes), op=MPI.SUM) > 0
+    assert np.allclose(model.theta.x.array.reshape(-1, 2)[nodes], 0.0)
+    assert np.allclose(model.d.x.array, d0, atol=1e-14)
+    assert math.isclose(model.strain_energy(), e0, rel_tol=1e-12)
+    x1 = model.create_vector()
+    model.get_state(x1)
+    f1 = x1.duplicate()
+    model.residual(x1, f1)
+    assert np.allclose(f1.getArray()[: 3 * n], f0.getArray()[: 3 * n], atol=1e-10 * f0.norm())
+    K = model.jacobian(x1)
+    dx = _random_state(model, 1.0, 8)
+    Kdx = x1.duplicate()
+    K.mult(dx, Kdx)
+    errs = []
+    for h in (1e-3, 5e-4, 2.5e-4):
+        xh = x1.copy()
+        xh.axpy(h, dx)
+        fh = x1.duplicate()
+        model.residual(xh, fh)
+        errs.append((fh - f1 - h * Kdx).norm())
+    assert min(_taylor_orders(errs)) > 1.9
