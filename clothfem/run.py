@@ -1,7 +1,9 @@
 """Run a validated scene: build only what it needs, solve, write results as they come.
 
 The log says what was built (and what was left out because the scene does not need it).
-Results go to ``out``: ``fabric.xdmf`` (ParaView), ``history.csv`` (one row per accepted
+Scenes with ``[[body]]`` segments run the quasi-static contact path of
+:mod:`clothfem.scenes_arm` (settling, then the hinge motions; its own outputs). Otherwise
+results go to ``out``: ``fabric.xdmf`` (ParaView), ``history.csv`` (one row per accepted
 step, flushed at once), ``final.png``. SIGTERM and Ctrl-C stop the run cleanly: files are
 closed and every step already written is kept.
 """
@@ -143,9 +145,13 @@ def build_model(
         + (", ".join(f"{s['type']} on {s['where']}" for s in scene["supports"]) or "none"),
         "loads: " + (", ".join(ld["type"] for ld in scene["loads"]) or "none"),
         "inertia: not built (static integrator)",
-        "contact: not built (no body in the scene)",
-        "friction: not built (no contact)",
     ]
+    if scene["body"]:
+        from .scenes_arm import contact_log
+
+        log += contact_log(scene)
+    else:
+        log += ["contact: not built (no body in the scene)", "friction: not built (no contact)"]
     return model, log
 
 
@@ -175,6 +181,19 @@ def run_scene(scene: dict[str, Any], out: str | Path, *, comm: MPI.Comm = MPI.CO
         stop["signal"] = signum
 
     old = signal.signal(signal.SIGTERM, handler)
+    if scene["body"]:
+        from .scenes_arm import run_contact_scene
+
+        def check_stop(where: str) -> None:
+            if comm.allreduce(stop["signal"] is not None, op=MPI.LOR):
+                raise RunStopped(f"stopped by signal after {where}; results kept in {out}")
+
+        try:
+            run_contact_scene(scene, out, model=model, comm=comm, t0=t0, check_stop=check_stop)
+        finally:
+            signal.signal(signal.SIGTERM, old)
+        rank0_print(f"done in {time.perf_counter() - t0:.1f} s; results in {out}/")
+        return out
     try:
         with ResultWriter(out, model) as writer:
 

@@ -205,6 +205,83 @@ SCHEMA: dict[str, Section] = {
         "the solver",
         optional=True,
     ),
+    "body": Section(
+        {
+            "name": Key("str", "segment name (e.g. 'upper_arm', 'forearm')", required=True),
+            "type": Key("choice", "segment motion", required=True, choices=("fixed", "hinge")),
+            "radii": Key(
+                "vec3",
+                "ellipsoid radii (r1 along the limb axis, r2, r3) [m], all > 0",
+                required=True,
+            ),
+            "centre": Key("vec3", "ellipsoid centre at t = 0 [m]", required=True),
+            "axis": Key("vec3", "limb axis e1 (direction of r1) at t = 0", default=[1.0, 0.0, 0.0]),
+            "up": Key(
+                "vec3",
+                "direction of r2 at t = 0 (made orthogonal to axis); r3 along axis x up",
+                default=[0.0, 0.0, 1.0],
+            ),
+            "joint": Key("vec3", "hinge: joint centre on the rotation axis [m]"),
+            "hinge_axis": Key("vec3", "hinge: rotation axis (right-hand rule)"),
+            "omega": Key(
+                "float", "hinge: angular velocity [deg/s] (maps angle to time)", default=57.0, **POS
+            ),
+            "angle_max": Key("float", "hinge: final angle [deg]", lo=0.0, hi=180.0, open_lo=True),
+        },
+        "rigid ellipsoid body segments (Man & Swan 2007, Sec. 3.3); a body turns contact on",
+        many=True,
+        optional=True,
+        variants={"fixed": (), "hinge": ("joint", "hinge_axis", "angle_max")},
+    ),
+    "contact": Section(
+        {
+            "method": Key(
+                "choice",
+                "implicit Lagrange multipliers with an active set (Sec. 3.2)",
+                default="lagrange",
+                choices=("lagrange",),
+            ),
+            "mu": Key(
+                "float",
+                "Coulomb friction coefficient (0: no friction objects)",
+                default=0.0,
+                lo=0.0,
+            ),
+            "torque_segment": Key(
+                "str", "hinge segment whose joint is the Eq. 28 centre J (default: first hinge)"
+            ),
+            "torque_point": Key("vec3", "explicit Eq. 28 centre J [m] (overrides the joint)"),
+            "aj": Key(
+                "choice",
+                "Eq. 28 node set AJ: 'beyond_joint' = nodes whose reference position lies past "
+                "the plane through J normal to the torque segment's axis at t = 0; "
+                "'touching' = nodes in contact with the torque segment; 'all' = every node",
+                default="beyond_joint",
+                choices=("beyond_joint", "touching", "all"),
+            ),
+            "settle": Key(
+                "bool",
+                "ramp the loads (gravity) in solver.steps steps with the body at rest first",
+                default=True,
+            ),
+            "stabilization": Key(
+                "float",
+                "artificial viscous damping eta [Pa/m]: nodal force -eta A_i (u_i - u_i of the "
+                "last sub-step) to pass wrinkling points; 0 = none (reported as "
+                "stabilization_force)",
+                default=0.0,
+                lo=0.0,
+            ),
+            "increments": Key(
+                "int",
+                "equal recorded increments of the hinge motion (quasi-static)",
+                default=20,
+                lo=1,
+            ),
+        },
+        "contact of the fabric with the body (only built with a [[body]])",
+        optional=True,
+    ),
     "output": Section(
         {
             "every": Key("int", "write fields every N accepted steps", default=1, lo=1),
@@ -310,7 +387,45 @@ def validate(data: dict[str, Any]) -> dict[str, Any]:
             "mesh.n_around",
             f"must be a multiple of 4 for a cylinder, got {out['mesh']['n_around']}",
         )
+    _validate_body(data, out)
     return out
+
+
+def _validate_body(data: dict[str, Any], out: dict[str, Any]) -> None:
+    body = out["body"]
+    if "contact" in data and not body:
+        _fail("contact", "needs a body: add [[body]] segments (contact is only built with one)")
+    names = [seg["name"] for seg in body]
+    for i, seg in enumerate(body):
+        if names.count(seg["name"]) > 1:
+            _fail(f"body[{i}].name", f"must be unique, got {seg['name']!r} twice")
+        if not all(r > 0 for r in seg["radii"]):
+            _fail(f"body[{i}].radii", f"must be 3 numbers > 0 m, got {seg['radii']!r}")
+        axis, up = seg["axis"], seg["up"]
+        if math.hypot(*axis) == 0:
+            _fail(f"body[{i}].axis", "must be a non-zero vector, got [0, 0, 0]")
+        cross = [
+            axis[1] * up[2] - axis[2] * up[1],
+            axis[2] * up[0] - axis[0] * up[2],
+            axis[0] * up[1] - axis[1] * up[0],
+        ]
+        if math.hypot(*cross) <= 1e-9 * math.hypot(*axis) * math.hypot(*up):
+            _fail(f"body[{i}].up", f"must not be parallel to axis {axis!r}, got {up!r}")
+        if seg["type"] == "hinge" and math.hypot(*seg["hinge_axis"]) == 0:
+            _fail(f"body[{i}].hinge_axis", "must be a non-zero vector, got [0, 0, 0]")
+    if not body:
+        return
+    c = out["contact"]
+    hinges = [seg["name"] for seg in body if seg["type"] == "hinge"]
+    if c["torque_segment"] is not None and c["torque_segment"] not in hinges:
+        _fail(
+            "contact.torque_segment",
+            f"must name a hinge segment, one of {hinges}, got {c['torque_segment']!r}",
+        )
+    if not hinges and c["torque_point"] is None:
+        _fail("contact.torque_point", "required when no body segment is a hinge")
+    if c["aj"] != "all" and not hinges:
+        _fail("contact.aj", f"{c['aj']!r} needs a hinge segment; use 'all'")
 
 
 def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any]:

@@ -1,0 +1,434 @@
+"""Scenes with a body: quasi-static fabric-body contact driven by segment motions.
+
+Used by :func:`clothfem.run.run_scene` when a scene has ``[[body]]`` segments (the arm-sleeve
+elbow-flexion scene of Man & Swan 2007, Sec. 4.1, is ``demos/scenes/arm_sleeve.toml``).
+
+Stages
+------
+1. **Settling** (``contact.settle``): the loads (gravity) are ramped from 0 to full in
+   ``solver.steps`` equal steps with the body at rest, quasi-statically with contact
+   (:meth:`LagrangeContact.advance`, automatic cut-back), so the sleeve comes to rest on the arm.
+2. **Motion**: the hinge segments are turned to their ``angle_max`` in ``contact.increments``
+   equal angle increments (each one solved by ``advance``: sub-steps with cut-back). Every
+   increment is an equilibrium state with contact and friction history: **quasi-static**, no
+   inertia (the dynamics module is not coupled to contact yet), so ``omega`` only maps the
+   angle to a time column.
+
+After the settled state and after each increment one CSV row is written at once (angle, Eq. 28
+torque about J over the node set AJ, its component along the hinge axis, resultant, active
+nodes, max penetration, min multiplier, iterations, wall time), plus the fabric displacement
+to XDMF. PNG snapshots (fabric + ellipsoids) are drawn at the settled state, at about every
+quarter of the motion and at the end; ``torque_angle.png`` is (re)drawn at the end, also when
+the run stops early.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mpi4py import MPI
+
+from .body import FixedMotion, HingeMotion
+from .contact.forces import joint_torque
+from .contact.geometry import closest_point_union
+from .contact.lagrange import ContactDivergence, LagrangeContact, LagrangeContactParameters
+from .io import ResultWriter, rank0_print, snapshot_png
+from .shell import ShellModel
+from .static import SolverDivergence
+
+__all__ = ["body_motions", "contact_log", "run_contact_scene", "torque_centre"]
+
+
+def _frame(axis, up) -> np.ndarray:
+    """Rotation with columns e1 = axis, e2 = up made orthogonal, e3 = e1 x e2."""
+    e1 = np.asarray(axis, dtype=float)
+    e1 = e1 / np.linalg.norm(e1)
+    e2 = np.asarray(up, dtype=float)
+    e2 = e2 - (e2 @ e1) * e1
+    e2 /= np.linalg.norm(e2)
+    return np.stack([e1, e2, np.cross(e1, e2)], axis=1)
+
+
+def body_motions(scene: dict[str, Any]) -> list[FixedMotion | HingeMotion]:
+    """One motion per ``[[body]]`` segment (order kept), time in s."""
+    out: list[FixedMotion | HingeMotion] = []
+    for seg in scene["body"]:
+        q0 = _frame(seg["axis"], seg["up"])
+        if seg["type"] == "fixed":
+            out.append(FixedMotion(centre=seg["centre"], rotation=q0))
+        else:
+            out.append(
+                HingeMotion(
+                    joint=seg["joint"],
+                    axis=seg["hinge_axis"],
+                    omega=math.radians(seg["omega"]),
+                    angle_max=math.radians(seg["angle_max"]),
+                    centre0=seg["centre"],
+                    rotation0=q0,
+                )
+            )
+    return out
+
+
+def _torque_segment(scene: dict[str, Any]) -> int | None:
+    c = scene["contact"]
+    for i, seg in enumerate(scene["body"]):
+        if seg["type"] == "hinge" and c["torque_segment"] in (None, seg["name"]):
+            return i
+    return None
+
+
+def torque_centre(scene: dict[str, Any]) -> np.ndarray:
+    """Eq. 28 centre J in m: ``contact.torque_point`` or the torque segment's joint."""
+    c = scene["contact"]
+    if c["torque_point"] is not None:
+        return np.asarray(c["torque_point"], dtype=float)
+    return np.asarray(scene["body"][_torque_segment(scene)]["joint"], dtype=float)
+
+
+def contact_log(scene: dict[str, Any]) -> list[str]:
+    """Log lines describing the body, contact and friction a scene builds."""
+    segs = []
+    for seg in scene["body"]:
+        r = ", ".join(f"{v:g}" for v in seg["radii"])
+        if seg["type"] == "fixed":
+            segs.append(f"{seg['name']} fixed (radii {r} m)")
+        else:
+            segs.append(
+                f"{seg['name']} hinge about {seg['hinge_axis']} through {seg['joint']} m to "
+                f"{seg['angle_max']:g} deg (radii {r} m)"
+            )
+    c = scene["contact"]
+    k = _torque_segment(scene)
+    J = torque_centre(scene)
+    aj = c["aj"] if c["aj"] == "all" else f"{c['aj']} of {scene['body'][k]['name']}"
+    return [
+        f"body: {len(segs)} rigid ellipsoid(s): " + "; ".join(segs),
+        f"contact: {c['method']} (implicit Lagrange multipliers, active set), quasi-static, "
+        f"settle {'on' if c['settle'] else 'off'}, {c['increments']} motion increments, "
+        f"torque about J = {J.tolist()} m over AJ = {aj}",
+        (
+            f"friction: Coulomb mu {c['mu']:g} (regularised return map)"
+            if c["mu"] > 0
+            else "friction: not built (mu = 0)"
+        ),
+    ]
+
+
+def _aj_mask(scene: dict[str, Any], J: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
+    """Reference-coordinate node selector for the static AJ choices (None = all nodes)."""
+    c = scene["contact"]
+    if c["aj"] != "beyond_joint":
+        return None
+    e1 = np.asarray(scene["body"][_torque_segment(scene)]["axis"], dtype=float)
+    e1 = e1 / np.linalg.norm(e1)
+    return lambda X: (X.T - J) @ e1 > 0.0
+
+
+def _drive(
+    contact,
+    motions,
+    hinge_ids,
+    t0: float,
+    t1: float,
+    *,
+    max_cutbacks: int = 8,
+    max_substeps: int = 64,
+    on_sub=None,
+):
+    """Move the hinge segments from their poses at ``t0`` to those at ``t1`` (s) in sub-steps
+    on the exact hinge path: halve the sub-step after a failed one (state restored by
+    ``solve_step``), double it after every converged one; give up after ``max_cutbacks``
+    halvings in a row or ``max_substeps`` converged sub-steps. Returns the sub-step records."""
+
+    def place(t: float) -> None:
+        for i in hinge_ids:
+            p = motions[i].pose(t)
+            contact.set_pose(i, centre=p.centre, axes=p.rotation)
+
+    span = t1 - t0
+    t, h, cuts, recs = t0, span, 0, []
+    while t < t1 - 1e-12 * span:
+        if len(recs) >= max_substeps:  # creeping: fail rather than run for ever
+            raise ContactDivergence(
+                f"increment not done after {max_substeps} sub-steps (reached t = {t:.6g} s)"
+            )
+        trial = min(t1, t + h)
+        place(trial)
+        try:
+            rec = contact.solve_step(1.0)
+        except ContactDivergence:
+            place(t)
+            cuts += 1
+            if cuts > max_cutbacks:
+                raise ContactDivergence(
+                    f"no convergence after {max_cutbacks} halvings of the sub-step at "
+                    f"t = {t:.6g} s ({len(recs)} sub-steps converged in this increment)"
+                ) from None
+            h *= 0.5
+            continue
+        recs.append(rec)
+        if on_sub is not None:
+            on_sub(rec)
+        t, cuts, h = trial, 0, min(2.0 * h, span)
+    return recs
+
+
+class _ViscousStabilization:
+    """Artificial viscous damping of the quasi-static path (like Abaqus' STABILIZE): adds the
+    nodal force ``-eta A_i (u_i - u_i^prev)`` (eta in Pa/m, A_i the lumped reference nodal
+    area, ``u^prev`` the last converged sub-step) to the fabric's residual and ``eta A_i`` to
+    the diagonal of its tangent. It lets the path pass wrinkling points where the tangent is
+    singular; the force it leaves is reported (``stabilization_force``, N) to judge it."""
+
+    def __init__(self, model: ShellModel, area: np.ndarray, eta: float) -> None:
+        self.model, self.eta, self.n = model, eta, model.n_owned
+        self.c = np.repeat(eta * area, 3)  # per u row, N/m
+        self.u_prev = model.u.x.array[: 3 * self.n].copy()
+        self.last = 0.0
+        self._residual, self._jacobian = model.residual, model.jacobian
+        model.residual = self.residual  # instance attributes shadow the methods
+        model.jacobian = self.jacobian
+
+    def commit(self, *_args) -> None:
+        self.u_prev[:] = self.model.u.x.array[: 3 * self.n]
+
+    def residual(self, x, f) -> None:
+        self._residual(x, f)
+        xa = x.getArray(readonly=True)[: 3 * self.n]
+        fa = f.getArray()
+        fa[: 3 * self.n] += self.c * (xa - self.u_prev)
+
+    def jacobian(self, x, K=None):
+        K = self._jacobian(x, K)
+        d = K.createVecRight()
+        arr = d.getArray()
+        arr[:] = 0.0
+        arr[: 3 * self.n] = self.c
+        K.setDiagonal(d, addv=True)
+        d.destroy()
+        return K
+
+    def force(self, comm: MPI.Comm) -> float:
+        """Magnitude sum over nodes of the artificial force at the current state (N)."""
+        du = (self.model.u.x.array[: 3 * self.n] - self.u_prev).reshape(-1, 3)
+        f = np.linalg.norm(self.c.reshape(-1, 3) * du, axis=1).sum()
+        return comm.allreduce(float(f), op=MPI.SUM)
+
+
+def _ellipsoid_meshes(contact: LagrangeContact):
+    import pyvista as pv
+
+    meshes = []
+    for c, Q, r in contact.bodies:
+        e = pv.ParametricEllipsoid(*r, u_res=40, v_res=20, w_res=10)
+        e.points = np.asarray(e.points) @ Q.T + c
+        meshes.append(e)
+    return meshes
+
+
+def _torque_plot(csv_path: Path, png: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [  # the settled state (full load) and the motion; not the partial-load rows
+        r
+        for r in csv.DictReader(csv_path.open())
+        if r["stage"] == "motion" or float(r["load_factor"]) == 1.0
+    ]
+    if not rows:
+        return
+    a = [float(r["angle_deg"]) for r in rows]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot(a, [float(r["torque_mag"]) for r in rows], "o-", label="|tau| (Eq. 28)")
+    ax.plot(a, [-float(r["torque_flex"]) for r in rows], "s--", label="-tau . hinge axis")
+    ax.set_xlabel("flexion angle [deg]")
+    ax.set_ylabel("torque about the joint [N m]")
+    ax.set_title(title)
+    ax.grid(True)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
+def run_contact_scene(
+    scene: dict[str, Any],
+    out: Path,
+    *,
+    model: ShellModel,
+    comm: MPI.Comm,
+    t0: float,
+    check_stop: Callable[[str], None],
+) -> Path:
+    """Settle, then drive the hinges; write ``history.csv``, ``fabric.xdmf`` and PNGs to ``out``.
+
+    ``check_stop(where)`` is called after every written row and every converged sub-step
+    (raises to stop the run).
+    Raises :class:`SolverDivergence` when an increment fails below the smallest sub-step
+    (rows written so far are kept).
+    """
+    c = scene["contact"]
+    motions = body_motions(scene)
+    bodies = []
+    for seg, mo in zip(scene["body"], motions, strict=True):
+        pose = mo.pose(0.0)
+        bodies.append((pose.centre, pose.rotation, np.asarray(seg["radii"], dtype=float)))
+    contact = LagrangeContact(model, bodies, params=LagrangeContactParameters(mu=c["mu"]))
+    stab = None
+    if c["stabilization"] > 0:
+        stab = _ViscousStabilization(model, contact.lumped_area(), c["stabilization"])
+    J = torque_centre(scene)
+    k_torque = _torque_segment(scene)
+    hinge_axis = (
+        np.asarray(motions[k_torque].axis) if k_torque is not None else np.array([0.0, 0.0, 0.0])
+    )
+    aj = _aj_mask(scene, J)
+    png = scene["output"]["png"]
+    every = scene["output"]["every"]
+    name = scene["scene"]["name"]
+    thickness = model.thickness
+
+    def torque() -> np.ndarray:
+        if c["aj"] != "touching":
+            return contact.torque(J, nodes=aj)
+        st = contact.state()
+        tau = np.zeros(3)
+        if contact.n:
+            on = st.active & (closest_point_union(st.x, contact.bodies).body == k_torque)
+            tau = joint_torque(st.x, st.force_on_body, J, nodes=on)
+        return comm.allreduce(tau, op=MPI.SUM)
+
+    def snapshot(tag: str) -> None:
+        if png:
+            meshes = _ellipsoid_meshes(contact) if comm.rank == 0 else ()
+            snapshot_png(
+                model, out / f"snapshot_{tag}.png", title=f"{name} {tag}", extra_meshes=meshes
+            )
+
+    increments = c["increments"]
+    hinge_ids = [i for i, m in enumerate(motions) if isinstance(m, HingeMotion)]
+    t_end = max((motions[i].t_end for i in hinge_ids), default=0.0)
+    stage_wall = {"t": time.perf_counter()}
+
+    def on_sub(rec) -> None:
+        if stab is not None:  # force at the converged sub-step, then move the anchor
+            stab.last = stab.force(comm)
+            stab.commit()
+        check_stop(f"a sub-step at load factor {rec.load_factor:g}")
+
+    with ResultWriter(out, model) as writer:
+
+        def write_row(stage: str, inc: int, t: float, recs) -> None:
+            tau = torque()
+            res = contact.resultant()
+            angle = math.degrees(motions[k_torque].angle(t)) if k_torque is not None else 0.0
+            now = time.perf_counter()
+            last = recs[-1]
+            row = {
+                "stage": stage,
+                "increment": inc,
+                "time": t,
+                "load_factor": float(model.lam.value),
+                "angle_deg": angle,
+                "torque_x": tau[0],
+                "torque_y": tau[1],
+                "torque_z": tau[2],
+                "torque_mag": float(np.linalg.norm(tau)),
+                "torque_flex": float(tau @ hinge_axis),
+                "resultant_x": res[0],
+                "resultant_y": res[1],
+                "resultant_z": res[2],
+                "n_active": last.n_active,
+                "max_penetration": max(r.max_penetration for r in recs),
+                "min_multiplier": min(r.min_multiplier for r in recs),
+                "complementarity": max(r.complementarity for r in recs),
+                "sum_lam": last.total_normal_force,
+                "n_stick": last.n_stick,
+                "n_slip": last.n_slip,
+                "substeps": len(recs),
+                "active_set_iterations": sum(r.active_set_iterations for r in recs),
+                "newton_iterations": sum(r.newton_iterations for r in recs),
+                "dissipation_total": contact.dissipation_total,
+                "stabilization_force": stab.last if stab is not None else 0.0,
+                "wall_time": now - stage_wall["t"],
+                "elapsed": now - t0,
+            }
+            stage_wall["t"] = now
+            if stage == "settle" or inc % every == 0 or inc == increments:
+                # XDMF time: load factor - 1 while settling (ends at 0), then the motion time
+                writer.write(t if stage == "motion" else row["load_factor"] - 1.0, row)
+            else:
+                _csv_only(writer, row)
+            rank0_print(
+                f"  {stage:6s} {inc:3d}  angle {angle:6.2f} deg  |tau| {row['torque_mag']:.5g} N m"
+                f"  tau.axis {row['torque_flex']:+.5g}  active {last.n_active:4d}"
+                f"  pen {row['max_penetration']:.1e} m  sub {len(recs)}"
+                f"  sets {row['active_set_iterations']} newton {row['newton_iterations']}"
+                f"  {row['wall_time']:.1f} s"
+            )
+            if row["max_penetration"] > 1e-3 * thickness:
+                rank0_print(f"  warning: max penetration {row['max_penetration']:.2e} m > 1e-3 t")
+            check_stop(f"{stage} increment {inc}")
+
+        try:
+            if c["settle"]:
+                steps = scene["solver"]["steps"]
+                for s in range(1, steps + 1):
+                    try:
+                        recs = contact.advance(s / steps, on_step=on_sub)
+                    except ContactDivergence as exc:
+                        snapshot(f"stopped_settle_{s - 1}")
+                        raise SolverDivergence(
+                            f"contact failed while settling (load step {s} of {steps}): {exc}"
+                        ) from None
+                    write_row("settle", s, 0.0, recs)
+            else:
+                write_row("settle", 0, 0.0, [contact.solve_step(1.0)])
+            snapshot("settled")
+            quarter = max(1, increments // 4)
+            for inc in range(1, (increments if hinge_ids else 0) + 1):  # no hinge: settle only
+                t = t_end * inc / increments
+                try:
+                    recs = _drive(
+                        contact,
+                        motions,
+                        hinge_ids,
+                        t_end * (inc - 1) / increments,
+                        t,
+                        on_sub=on_sub,
+                    )
+                except ContactDivergence as exc:
+                    snapshot(f"stopped_{inc - 1:03d}")  # the last converged state
+                    raise SolverDivergence(
+                        f"contact failed in motion increment {inc} "
+                        f"(towards {math.degrees(motions[k_torque].angle(t)):.2f} deg): {exc}"
+                    ) from None
+                write_row("motion", inc, t, recs)
+                if inc % quarter == 0 and inc != increments:
+                    snapshot(f"{inc:03d}")
+            snapshot("final")
+        finally:
+            comm.barrier()
+            if png and comm.rank == 0 and writer.csv_path.exists():
+                _torque_plot(writer.csv_path, out / "torque_angle.png", name)
+    return out
+
+
+def _csv_only(writer: ResultWriter, row: dict[str, Any]) -> None:
+    """Append a CSV row without writing fields (rows between ``output.every`` field writes)."""
+    if writer.comm.rank == 0:
+        if writer._writer is None:
+            writer._csv = open(writer.csv_path, "w", newline="")  # noqa: SIM115
+            writer._writer = csv.DictWriter(writer._csv, fieldnames=list(row))
+            writer._writer.writeheader()
+        writer._writer.writerow(row)
+        writer._csv.flush()
