@@ -39,6 +39,10 @@ class ResultWriter:
         self.xdmf.write_function(self.model.u, time)
         for f in fields:
             self.xdmf.write_function(f, time)
+        self.append_row(row)
+
+    def append_row(self, row: dict[str, float]) -> None:
+        """Append ``row`` to the CSV history (flushed at once) without writing fields."""
         if self.comm.rank == 0:
             if self._writer is None:
                 self._csv = open(self.csv_path, "w", newline="")  # noqa: SIM115

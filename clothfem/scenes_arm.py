@@ -367,7 +367,7 @@ def run_contact_scene(
                 # XDMF time: load factor - 1 while settling (ends at 0), then the motion time
                 writer.write(t if stage == "motion" else row["load_factor"] - 1.0, row)
             else:
-                _csv_only(writer, row)
+                writer.append_row(row)
             rank0_print(
                 f"  {stage:6s} {inc:3d}  angle {angle:6.2f} deg  |tau| {row['torque_mag']:.5g} N m"
                 f"  tau.axis {row['torque_flex']:+.5g}  active {last.n_active:4d}"
@@ -421,14 +421,3 @@ def run_contact_scene(
             if png and comm.rank == 0 and writer.csv_path.exists():
                 _torque_plot(writer.csv_path, out / "torque_angle.png", name)
     return out
-
-
-def _csv_only(writer: ResultWriter, row: dict[str, Any]) -> None:
-    """Append a CSV row without writing fields (rows between ``output.every`` field writes)."""
-    if writer.comm.rank == 0:
-        if writer._writer is None:
-            writer._csv = open(writer.csv_path, "w", newline="")  # noqa: SIM115
-            writer._writer = csv.DictWriter(writer._csv, fieldnames=list(row))
-            writer._writer.writeheader()
-        writer._writer.writerow(row)
-        writer._csv.flush()
