@@ -13,7 +13,7 @@ contact and solver diagnostics); at the end a torque-angle PNG and a snapshot. T
 line printed is the torque at the final angle.
 
 Run:  .venv/bin/python demos/arm_sleeve_dynamic.py --out results/arm-sleeve-dynamic
-      [--dt 0.01] [--set contact.mu=0.5 ...]
+      [--dt 0.01] [--gamma 0.6] [--set contact.mu=0.5 ...]
 """
 
 import argparse
