@@ -1,10 +1,13 @@
-"""Command line: ``clothfem run|validate|schema``.
+"""Command line: ``clothfem run|validate|schema|plot|report``.
 
-    clothfem run SCENE.toml [--out DIR] [--set key=value ...] [PETSc options]
+    clothfem run SCENE.toml [--out DIR] [--set key=value ...] [--resume] [PETSc options]
     clothfem validate SCENE.toml [--set key=value ...]
     clothfem schema            # the scene reference (docs/scene.md)
+    clothfem plot RUN_DIR [RUN_DIR ...] [--out PNG] [--label NAME ...] [--y torque_flex]
+    clothfem report RUN_DIR [--markdown FILE]
 
-Works under ``mpirun -n N``. Exit status: 2 invalid scene (one-line message), 3 solver
+Works under ``mpirun -n N``; plot and report need neither MPI nor PETSc (docs/cli.md).
+Exit status: 2 invalid scene or unreadable run folder (one-line message), 3 solver
 failure below the smallest step, 130 interrupted; results written so far are kept.
 """
 
@@ -22,11 +25,29 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("scene")
     run.add_argument("--out", default=None, help="output folder (default results/<scene name>)")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    run.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue a newmark run from the last checkpoint in --out (same number of ranks)",
+    )
     val = sub.add_parser("validate", help="check a scene file")
     val.add_argument("scene")
     val.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     sub.add_parser("schema", help="print the scene reference")
+    plot = sub.add_parser("plot", help="torque-angle plot of one or more run folders")
+    plot.add_argument("run_dirs", nargs="+", metavar="RUN_DIR")
+    plot.add_argument("--out", default=None, metavar="PNG", help="default RUN_DIR/torque_angle.png")
+    plot.add_argument("--label", action="extend", nargs="+", default=[], metavar="NAME")
+    plot.add_argument("--y", choices=["torque_mag", "torque_flex"], default="torque_mag")
+    plot.add_argument("--title", default=None)
+    rep = sub.add_parser("report", help="short Markdown report of a run folder")
+    rep.add_argument("run_dir", metavar="RUN_DIR")
+    rep.add_argument("--markdown", default=None, metavar="FILE", help="also write it to FILE")
     args, petsc_args = parser.parse_known_args(argv)
+    if args.command in ("plot", "report"):
+        if petsc_args:
+            parser.error(f"unrecognized arguments: {' '.join(petsc_args)}")
+        return _post(args)
 
     import petsc4py
 
@@ -49,16 +70,40 @@ def main(argv: list[str] | None = None) -> int:
 
     out = Path(args.out or Path("results") / scene["scene"]["name"])
     try:
-        run_scene(scene, out)
+        run_scene(scene, out, resume=args.resume)
     except scenes.SceneError as exc:
         print(f"clothfem: {exc}", file=sys.stderr)
         return 2
     except SolverDivergence as exc:
         print(f"clothfem: stopped: {exc}; steps written so far are kept in {out}", file=sys.stderr)
         return 3
-    except (RunStopped, KeyboardInterrupt) as exc:
-        print(f"clothfem: {exc or 'interrupted'}; results kept in {out}", file=sys.stderr)
+    except RunStopped as exc:
+        print(f"clothfem: {exc}", file=sys.stderr)
         return 130
+    except KeyboardInterrupt:
+        print(f"clothfem: interrupted; results kept in {out}", file=sys.stderr)
+        return 130
+    return 0
+
+
+def _post(args: argparse.Namespace) -> int:
+    """``plot`` and ``report``: post-processing of run folders, no MPI/PETSc."""
+    from . import report
+
+    try:
+        if args.command == "plot":
+            png = report.plot_runs(
+                args.run_dirs, args.out, labels=args.label, y=args.y, title=args.title
+            )
+            print(png)
+            return 0
+        text = report.report_markdown(args.run_dir)
+    except report.ReportError as exc:
+        print(f"clothfem: {exc}", file=sys.stderr)
+        return 2
+    print(text, end="")
+    if args.markdown:
+        Path(args.markdown).write_text(text)
     return 0
 
 

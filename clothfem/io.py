@@ -21,7 +21,11 @@ __all__ = ["ResultWriter", "snapshot_png"]
 class ResultWriter:
     """XDMF file of the displacement (and extra fields) plus a CSV history, in ``out``."""
 
-    def __init__(self, out: str | Path, model, *, name: str = "fabric") -> None:
+    def __init__(
+        self, out: str | Path, model, *, name: str = "fabric", keep_rows: int | None = None
+    ) -> None:
+        """``keep_rows``: continue an existing ``history.csv`` after its first ``keep_rows``
+        rows (later rows are dropped: a resumed run rewrites them); None starts a new one."""
         self.out = Path(out)
         self.comm = model.comm
         if self.comm.rank == 0:
@@ -33,12 +37,25 @@ class ResultWriter:
         self.csv_path = self.out / "history.csv"
         self._csv = None
         self._writer = None
+        if keep_rows is not None and self.comm.rank == 0:
+            with open(self.csv_path, newline="") as fh:
+                reader = csv.DictReader(fh)
+                fields, rows = reader.fieldnames, list(reader)[:keep_rows]
+            self._csv = open(self.csv_path, "w", newline="")  # noqa: SIM115
+            self._writer = csv.DictWriter(self._csv, fieldnames=fields)
+            self._writer.writeheader()
+            self._writer.writerows(rows)
+            self._csv.flush()
 
-    def write(self, time: float, row: dict[str, float], fields=()) -> None:
-        """Write the state at ``time`` and append ``row`` to the CSV history (flushed)."""
+    def write_fields(self, time: float, fields=()) -> None:
+        """Write the displacement (and ``fields``) at ``time`` to the XDMF file."""
         self.xdmf.write_function(self.model.u, time)
         for f in fields:
             self.xdmf.write_function(f, time)
+
+    def write(self, time: float, row: dict[str, float], fields=()) -> None:
+        """Write the state at ``time`` and append ``row`` to the CSV history (flushed)."""
+        self.write_fields(time, fields)
         self.append_row(row)
 
     def append_row(self, row: dict[str, float]) -> None:

@@ -10,6 +10,7 @@ closed and every step already written is kept.
 
 from __future__ import annotations
 
+import json
 import math
 import signal
 import time
@@ -144,7 +145,12 @@ def build_model(
         "supports: "
         + (", ".join(f"{s['type']} on {s['where']}" for s in scene["supports"]) or "none"),
         "loads: " + (", ".join(ld["type"] for ld in scene["loads"]) or "none"),
-        "inertia: not built (static integrator)",
+        (
+            "inertia: not built (static integrator)"
+            if scene["solver"]["integrator"] == "static"
+            else f"inertia: consistent mass, Newmark gamma {scene['solver']['gamma']:g}, "
+            f"dt {scene['solver']['dt']:g} s"
+        ),
     ]
     if scene["body"]:
         from .scenes_arm import contact_log
@@ -155,14 +161,37 @@ def build_model(
     return model, log
 
 
-def run_scene(scene: dict[str, Any], out: str | Path, *, comm: MPI.Comm = MPI.COMM_WORLD) -> Path:
-    """Run ``scene`` and write its results to ``out``; returns the output folder."""
+def _write_summary(out: Path, summary: dict[str, Any], comm: MPI.Comm) -> None:
+    """``out/summary.json`` (rank 0): completed, reason, final angle, steps, wall time..."""
+    if comm.rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
+
+
+def run_scene(
+    scene: dict[str, Any],
+    out: str | Path,
+    *,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    resume: bool = False,
+) -> Path:
+    """Run ``scene`` and write its results to ``out``; returns the output folder.
+
+    ``resume``: continue a dynamic run from the last checkpoint in ``out/checkpoint``.
+    ``out/summary.json`` says at the end whether the run completed (and why not).
+    """
     out = Path(out)
-    if scene["solver"]["integrator"] != "static":
+    if scene["solver"]["integrator"] != "static" and not scene["body"]:
         raise SceneError(
-            f"scene key 'solver.integrator': {scene['solver']['integrator']!r} is not available "
-            "in this version; use 'static'"
+            f"scene key 'solver.integrator': {scene['solver']['integrator']!r} needs a body "
+            "([[body]] segments) in this version; use 'static'"
         )
+    if scene["solver"]["integrator"] != "static" and scene["material"]["rho"] <= 0:
+        raise SceneError(
+            "scene key 'material.rho': the newmark integrator needs a density > 0 kg/m^3"
+        )
+    if resume and scene["solver"]["integrator"] == "static":
+        raise SceneError("--resume needs solver.integrator = 'newmark' (checkpoints)")
     t0 = time.perf_counter()
     model, log = build_model(scene, comm)
     rank0_print(f"scene {scene['scene']['name']!r}")
@@ -188,10 +217,26 @@ def run_scene(scene: dict[str, Any], out: str | Path, *, comm: MPI.Comm = MPI.CO
             if comm.allreduce(stop["signal"] is not None, op=MPI.LOR):
                 raise RunStopped(f"stopped by signal after {where}; results kept in {out}")
 
+        summary: dict[str, Any] = {"scene": scene["scene"]["name"], "completed": False}
         try:
-            run_contact_scene(scene, out, model=model, comm=comm, t0=t0, check_stop=check_stop)
+            run_contact_scene(
+                scene,
+                out,
+                model=model,
+                comm=comm,
+                t0=t0,
+                check_stop=check_stop,
+                resume=resume,
+                summary=summary,
+            )
+            summary["completed"] = True
+        except BaseException as exc:
+            summary["reason"] = f"{type(exc).__name__}: {exc}"
+            raise
         finally:
             signal.signal(signal.SIGTERM, old)
+            summary["wall_time"] = time.perf_counter() - t0
+            _write_summary(out, summary, comm)
         rank0_print(f"done in {time.perf_counter() - t0:.1f} s; results in {out}/")
         return out
     try:

@@ -189,7 +189,7 @@ SCHEMA: dict[str, Section] = {
                 "choice",
                 "time integration",
                 default="static",
-                choices=("static", "newmark", "generalized-alpha", "central-difference"),
+                choices=("static", "newmark"),
             ),
             "steps": Key("int", "static: initial number of load steps", default=10, lo=1),
             "min_increment": Key("float", "static: smallest load increment", default=1e-4, **POS),
@@ -200,6 +200,35 @@ SCHEMA: dict[str, Section] = {
                 lo=0.0,
                 hi=1.0,
                 open_lo=True,
+            ),
+            "dt": Key(
+                "float", "newmark: time step [s]", default=0.01, lo=0.0, hi=1.0, open_lo=True
+            ),
+            "dt_min": Key(
+                "float",
+                "newmark: smallest time step after halvings [s] (default dt/64)",
+                lo=0.0,
+                open_lo=True,
+            ),
+            "gamma": Key(
+                "float",
+                "newmark: gamma in [0.5, 1] (beta = (gamma + 1/2)^2 / 4); > 0.5 damps the "
+                "highest frequencies",
+                default=0.6,
+                lo=0.5,
+                hi=1.0,
+            ),
+            "settle_time": Key(
+                "float",
+                "newmark: time [s] with the body at rest before the motion starts (settling)",
+                default=0.2,
+                lo=0.0,
+            ),
+            "ramp_time": Key(
+                "float",
+                "newmark: time [s] over which the loads (gravity) ramp up",
+                default=0.1,
+                lo=0.0,
             ),
         },
         "the solver",
@@ -286,6 +315,12 @@ SCHEMA: dict[str, Section] = {
         {
             "every": Key("int", "write fields every N accepted steps", default=1, lo=1),
             "png": Key("bool", "write PNG snapshots", default=True),
+            "checkpoint_every": Key(
+                "int",
+                "newmark: write a restart checkpoint every N accepted steps (0 = never)",
+                default=10,
+                lo=0,
+            ),
         },
         "what is written",
         optional=True,

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -39,6 +40,7 @@ from .contact.forces import joint_torque
 from .contact.geometry import closest_point_union
 from .contact.lagrange import ContactDivergence, LagrangeContact, LagrangeContactParameters
 from .io import ResultWriter, rank0_print, snapshot_png
+from .scene import SceneError
 from .shell import ShellModel
 from .static import SolverDivergence
 
@@ -110,9 +112,14 @@ def contact_log(scene: dict[str, Any]) -> list[str]:
     aj = c["aj"] if c["aj"] == "all" else f"{c['aj']} of {scene['body'][k]['name']}"
     return [
         f"body: {len(segs)} rigid ellipsoid(s): " + "; ".join(segs),
-        f"contact: {c['method']} (implicit Lagrange multipliers, active set), quasi-static, "
-        f"settle {'on' if c['settle'] else 'off'}, {c['increments']} motion increments, "
-        f"torque about J = {J.tolist()} m over AJ = {aj}",
+        f"contact: {c['method']} (implicit Lagrange multipliers, active set), "
+        + (
+            f"quasi-static, settle {'on' if c['settle'] else 'off'}, {c['increments']} motion "
+            "increments, "
+            if scene["solver"]["integrator"] == "static"
+            else f"dynamic (Newmark), settling {scene['solver']['settle_time']:g} s, "
+        )
+        + f"torque about J = {J.tolist()} m over AJ = {aj}",
         (
             f"friction: Coulomb mu {c['mu']:g} (regularised return map)"
             if c["mu"] > 0
@@ -268,14 +275,29 @@ def run_contact_scene(
     comm: MPI.Comm,
     t0: float,
     check_stop: Callable[[str], None],
+    resume: bool = False,
+    summary: dict[str, Any] | None = None,
 ) -> Path:
     """Settle, then drive the hinges; write ``history.csv``, ``fabric.xdmf`` and PNGs to ``out``.
 
-    ``check_stop(where)`` is called after every written row and every converged sub-step
-    (raises to stop the run).
-    Raises :class:`SolverDivergence` when an increment fails below the smallest sub-step
-    (rows written so far are kept).
+    ``solver.integrator = "newmark"``: dynamic (:func:`_run_dynamic`); "static": a sequence of
+    equilibria. ``check_stop(where)`` is called after every written row and every converged
+    sub-step (raises to stop the run). ``summary`` (dict) is updated as the run goes (final
+    angle, steps, cut-backs, max penetration). Raises :class:`SolverDivergence` when a step
+    fails below the smallest step (rows written so far are kept).
     """
+    summary = summary if summary is not None else {}
+    if scene["solver"]["integrator"] == "newmark":
+        return _run_dynamic(
+            scene,
+            out,
+            model=model,
+            comm=comm,
+            t0=t0,
+            check_stop=check_stop,
+            resume=resume,
+            summary=summary,
+        )
     c = scene["contact"]
     motions = body_motions(scene)
     bodies = []
@@ -363,6 +385,12 @@ def run_contact_scene(
                 "elapsed": now - t0,
             }
             stage_wall["t"] = now
+            summary.update(
+                final_angle_deg=angle,
+                steps=summary.get("steps", 0) + len(recs),
+                cutbacks=0,
+                max_penetration=max(summary.get("max_penetration", 0.0), row["max_penetration"]),
+            )
             if stage == "settle" or inc % every == 0 or inc == increments:
                 # XDMF time: load factor - 1 while settling (ends at 0), then the motion time
                 writer.write(t if stage == "motion" else row["load_factor"] - 1.0, row)
@@ -419,5 +447,209 @@ def run_contact_scene(
         finally:
             comm.barrier()
             if png and comm.rank == 0 and writer.csv_path.exists():
+                _torque_plot(writer.csv_path, out / "torque_angle.png", name)
+    return out
+
+
+def _checkpoint(out: Path, comm: MPI.Comm, data: dict[str, Any]) -> None:
+    """Write this rank's restart file atomically (``out/checkpoint/rank<r>-of-<n>.npz``)."""
+    folder = out / "checkpoint"
+    if comm.rank == 0:
+        folder.mkdir(parents=True, exist_ok=True)
+    comm.barrier()
+    path = folder / f"rank{comm.rank}-of-{comm.size}.npz"
+    tmp = path.with_suffix(".tmp")
+    with open(tmp, "wb") as fh:
+        np.savez(fh, **data)
+    os.replace(tmp, path)  # a run killed while writing keeps the previous checkpoint
+    comm.barrier()
+
+
+def _load_checkpoint(out: Path, comm: MPI.Comm) -> dict[str, np.ndarray]:
+    path = out / "checkpoint" / f"rank{comm.rank}-of-{comm.size}.npz"
+    ok = comm.allreduce(path.exists(), op=MPI.LAND)
+    if not ok:
+        raise SceneError(
+            f"--resume: no checkpoint for {comm.size} rank(s) in {out / 'checkpoint'} "
+            "(resume with the same number of ranks as the interrupted run)"
+        )
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
+
+
+def _run_dynamic(
+    scene: dict[str, Any],
+    out: Path,
+    *,
+    model: ShellModel,
+    comm: MPI.Comm,
+    t0: float,
+    check_stop: Callable[[str], None],
+    resume: bool,
+    summary: dict[str, Any],
+) -> Path:
+    """The paper's approach (Sec. 3.1.3): implicit Newmark with Lagrange-multiplier contact
+    (:class:`clothfem.contact.dynamic.DynamicContact`). The loads ramp up over
+    ``solver.ramp_time`` with the body at rest until ``solver.settle_time`` (dynamic
+    settling); then the hinge segments move at their angular velocity. One CSV row per
+    accepted step; fields every ``output.every`` steps; a restart checkpoint every
+    ``output.checkpoint_every`` steps (``clothfem run --resume`` continues from it)."""
+    from .contact.dynamic import DynamicContact
+    from .dynamics import ShellSystem
+
+    c, sv, o = scene["contact"], scene["solver"], scene["output"]
+    motions = body_motions(scene)
+    radii = [np.asarray(seg["radii"], dtype=float) for seg in scene["body"]]
+    t_settle, t_ramp = sv["settle_time"], sv["ramp_time"]
+    zero = np.zeros(3)
+
+    def bodies_at(t: float):
+        poses = [m.pose(max(t - t_settle, 0.0)) for m in motions]
+        moving = t > t_settle
+        vel = [(p.velocity, p.angular_velocity) if moving else (zero, zero) for p in poses]
+        return [(p.centre, p.rotation, r) for p, r in zip(poses, radii, strict=True)], vel
+
+    gamma = sv["gamma"]
+    dc = DynamicContact(
+        ShellSystem(model),
+        bodies_at,
+        params=LagrangeContactParameters(mu=c["mu"]),
+        beta=(gamma + 0.5) ** 2 / 4,
+        gamma=gamma,
+    )
+    contact = dc.contact
+    J = torque_centre(scene)
+    k_torque = _torque_segment(scene)
+    hinge_axis = np.asarray(motions[k_torque].axis) if k_torque is not None else np.zeros(3)
+    aj = _aj_mask(scene, J)
+    hinge_ids = [i for i, m in enumerate(motions) if isinstance(m, HingeMotion)]
+    t_motion = max((motions[i].t_end for i in hinge_ids), default=0.0)
+    t_end = t_settle + t_motion
+    angle_end = math.degrees(motions[k_torque].angle(t_motion)) if k_torque is not None else 0.0
+    name = scene["scene"]["name"]
+
+    def angle_at(t: float) -> float:
+        return math.degrees(motions[k_torque].angle(max(t - t_settle, 0.0))) if hinge_ids else 0.0
+
+    def snapshot(tag: str) -> None:
+        if o["png"]:
+            meshes = _ellipsoid_meshes(contact) if comm.rank == 0 else ()
+            snapshot_png(
+                model, out / f"snapshot_{tag}.png", title=f"{name} {tag}", extra_meshes=meshes
+            )
+
+    state = {"step": 0, "rows": 0, "cut": 0, "pen": 0.0, "newton": 0, "snap": 0}
+    keep = None
+    if resume:
+        data = _load_checkpoint(out, comm)
+        dc.restore_arrays(data)
+        state.update({k: int(data[f"run_{k}"]) for k in ("step", "rows", "cut", "newton", "snap")})
+        state["pen"] = float(data["run_pen"])
+        keep = state["rows"]
+        rank0_print(f"  resumed from the checkpoint at t = {dc.t:.6g} s (step {state['step']})")
+    xdmf_name = "fabric" if keep is None else f"fabric_resumed_{state['step']:05d}"
+    timers0 = dict(contact.timers)
+    quarters = [angle_end * q / 4 for q in (1, 2, 3)]
+
+    with ResultWriter(out, model, name=xdmf_name, keep_rows=keep) as writer:
+
+        def on_step(r) -> None:
+            state["step"] += 1
+            state["cut"] += r.cutbacks
+            cr = r.contact
+            state["pen"] = max(state["pen"], cr.max_penetration)
+            state["newton"] += cr.newton_iterations
+            tio = time.perf_counter()
+            step = state["step"]
+            if step % o["every"] == 0:
+                writer.write_fields(r.time)
+            if o["checkpoint_every"] and step % o["checkpoint_every"] == 0:
+                run = {f"run_{k}": np.array(v) for k, v in state.items()}
+                run["run_rows"] = np.array(state["rows"] + 1)  # this step's row included
+                _checkpoint(out, comm, {**dc.state_arrays(), **run})
+            t_io = time.perf_counter() - tio
+            tau = contact.torque(J, nodes=aj)
+            res = contact.resultant()
+            angle = angle_at(r.time)
+            tm = {k: contact.timers[k] - timers0[k] for k in timers0}
+            timers0.update(contact.timers)
+            now = time.perf_counter()
+            row = {
+                "stage": "settle" if r.time <= t_settle + 1e-12 else "motion",
+                "increment": step,
+                "time": r.time,
+                "dt": r.dt,
+                "load_factor": float(model.lam.value),
+                "angle_deg": angle,
+                "torque_x": tau[0],
+                "torque_y": tau[1],
+                "torque_z": tau[2],
+                "torque_mag": float(np.linalg.norm(tau)),
+                "torque_flex": float(tau @ hinge_axis),
+                "resultant_x": res[0],
+                "resultant_y": res[1],
+                "resultant_z": res[2],
+                "n_active": cr.n_active,
+                "max_penetration": cr.max_penetration,
+                "min_multiplier": cr.min_multiplier,
+                "complementarity": cr.complementarity,
+                "sum_lam": cr.total_normal_force,
+                "n_stick": cr.n_stick,
+                "n_slip": cr.n_slip,
+                "cutbacks": r.cutbacks,
+                "active_set_iterations": cr.active_set_iterations,
+                "newton_iterations": cr.newton_iterations,
+                "kinetic_energy": r.kinetic_energy,
+                "strain_energy": r.strain_energy,
+                "dissipation_total": contact.dissipation_total,
+                "t_assembly": tm["assembly"],
+                "t_contact": tm["contact"],
+                "t_solve": tm["solve"],
+                "t_io": t_io,
+                "wall_time": cr.wall_time,
+                "elapsed": now - t0,
+            }
+            writer.append_row(row)
+            state["rows"] += 1
+            summary.update(
+                final_angle_deg=angle,
+                time=r.time,
+                steps=step,
+                cutbacks=state["cut"],
+                max_penetration=state["pen"],
+                newton_iterations=state["newton"],
+            )
+            frac = min(max(r.time / t_end, 0.0), 1.0) if t_end > 0 else 1.0
+            rank0_print(
+                f"  [{'#' * int(20 * frac):<20}] t {r.time:7.4f} s  angle {angle:6.2f} deg  "
+                f"|tau| {row['torque_mag']:.4f} N m  step {step}  dt {r.dt:.2e}  cut "
+                f"{r.cutbacks}  active {cr.n_active}  newton {cr.newton_iterations}  "
+                f"{now - t0:.0f} s"
+            )
+            if row["stage"] == "motion" and state["snap"] == 0:
+                state["snap"] = 1
+                snapshot("settled")
+            while state["snap"] <= 3 and angle >= quarters[state["snap"] - 1] - 1e-9:
+                snapshot(f"{quarters[state['snap'] - 1]:04.1f}deg")
+                state["snap"] += 1
+            check_stop(f"step {step} (t = {r.time:.6g} s)")
+
+        try:
+            dc.run(
+                t_end=t_end,
+                dt=sv["dt"],
+                dt_min=sv["dt_min"],
+                load=(lambda t: min(t / t_ramp, 1.0)) if t_ramp > 0 else (lambda t: 1.0),
+                on_step=on_step,
+            )
+            snapshot("final")
+        except ContactDivergence as exc:
+            snapshot(f"stopped_{angle_at(dc.t):04.1f}deg")
+            raise SolverDivergence(
+                f"dynamic contact stopped at t = {dc.t:.6g} s ({angle_at(dc.t):.2f} deg): {exc}"
+            ) from None
+        finally:
+            comm.barrier()
+            if o["png"] and comm.rank == 0 and writer.csv_path.exists():
                 _torque_plot(writer.csv_path, out / "torque_angle.png", name)
     return out

@@ -24,6 +24,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
 from petsc4py import PETSc
 
 from .lagrange import (
@@ -98,7 +99,10 @@ class DynamicContactRecord:
 class DynamicContact:
     """Newmark (beta, gamma) time stepping of a :class:`clothfem.dynamics.ShellSystem` with
     Lagrange-multiplier contact against the ellipsoids ``bodies_at(t) -> (ellipsoids,
-    velocities)`` (see :func:`clothfem.contact.film.body_state`)."""
+    velocities)`` (see :func:`clothfem.contact.film.body_state`).
+
+    ``rebase`` [rad]: after every accepted step, nodes rotated by more than this are re-based
+    on their current director (:meth:`ShellSystem.rebase`); None never re-bases."""
 
     def __init__(
         self,
@@ -109,12 +113,14 @@ class DynamicContact:
         beta: float = 0.25,
         gamma: float = 0.5,
         slaves=None,
+        rebase: float | None = 0.5,
     ) -> None:
         if not (0 < beta <= 0.5):
             raise ValueError(f"DynamicContact beta must be in (0, 0.5], got {beta!r}")
         if not (0.5 <= gamma <= 1.0):
             raise ValueError(f"DynamicContact gamma must be in [0.5, 1], got {gamma!r}")
         self.system, self.beta, self.gamma = system, beta, gamma
+        self.rebase = rebase
         self.bodies_at = bodies_at
         self.view = _InertialModel(system)
         geo, _ = bodies_at(0.0)
@@ -127,6 +133,27 @@ class DynamicContact:
         self.a.set(0.0)
         self.t = 0.0
         self._xt = self.x.duplicate()
+
+    def state_arrays(self) -> dict:
+        """Everything a resumed run needs (rank-local): time, x, v, a, the shell's and the
+        contact solver's state."""
+        out = {"t": np.array(self.t)}
+        for k in ("x", "v", "a"):
+            out[k] = getattr(self, k).getArray(readonly=True).copy()
+        out.update({f"model_{k}": v for k, v in self.system.model.state_arrays().items()})
+        out.update({f"contact_{k}": v for k, v in self.contact.state_arrays().items()})
+        return out
+
+    def restore_arrays(self, data) -> None:
+        """Inverse of :meth:`state_arrays` (collective)."""
+        self.system.model.restore_arrays({k[6:]: data[k] for k in data if k.startswith("model_")})
+        self.contact.restore_arrays({k[8:]: data[k] for k in data if k.startswith("contact_")})
+        for k in ("x", "v", "a"):
+            arr = getattr(self, k).getArray()
+            if data[k].shape != arr.shape:
+                raise ValueError("checkpoint does not match this mesh / number of ranks")
+            arr[:] = data[k]
+        self.t = float(data["t"])
 
     def kinetic_energy(self) -> float:
         Mv = self.v.duplicate()
@@ -162,6 +189,8 @@ class DynamicContact:
         a_new.copy(self.a)
         x_new.copy(self.x)
         self.t += dt
+        if self.rebase is not None:  # keep |theta| away from pi at folds (ShellModel.rebase)
+            self.system.rebase(self.x, self.v, self.a, threshold=self.rebase)
         return rec
 
     def run(

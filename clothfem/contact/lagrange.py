@@ -62,6 +62,7 @@ override with ``-contact_lagrange_pc_factor_mat_solver_type superlu_dist`` etc.
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -95,6 +96,8 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+log = logging.getLogger("clothfem.contact.lagrange")
 
 
 class ContactDivergence(RuntimeError):
@@ -272,6 +275,40 @@ class LagrangeContact:
         self._build_solver()
         self._build_area_forms()
         self._K: PETSc.Mat | None = None
+        # cumulative wall time [s] by part: fabric residual/tangent assembly, the contact layer
+        # (projections, friction, bordered matrix), the linear solve
+        self.timers = {"assembly": 0.0, "contact": 0.0, "solve": 0.0}
+
+    # ------------------------------------------------------------------ checkpoint
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """Rank-local contact state to checkpoint (active set, multipliers, friction history,
+        body poses, counters); restore with :meth:`restore_arrays` on the same ranks."""
+        out = {
+            "active": self.active.copy(),
+            "lam": self.lam.copy(),
+            "last_friction": self._last_friction.copy(),
+            "counters": np.array([self.step_count, self.dissipation_total]),
+        }
+        for k, (c, Q, r) in enumerate(self.bodies):
+            out[f"body{k}"] = np.concatenate([c, Q.ravel(), r])
+        if self._friction is not None:
+            f = self._friction
+            out.update(fr_xi=f.xi.copy(), fr_body=f.body.copy(), fr_force=f.force_old.copy())
+        return out
+
+    def restore_arrays(self, data: dict[str, np.ndarray]) -> None:
+        """Inverse of :meth:`state_arrays`."""
+        if data["active"].shape != self.active.shape:
+            raise ValueError("checkpoint contact state does not match this mesh / rank count")
+        self.active[:], self.lam[:] = data["active"], data["lam"]
+        self._last_friction[:] = data["last_friction"]
+        self.step_count, self.dissipation_total = int(data["counters"][0]), data["counters"][1]
+        for k in range(len(self.bodies)):
+            b = data[f"body{k}"]
+            self.set_pose(k, centre=b[:3], axes=b[3:12].reshape(3, 3), radii=b[12:])
+        if self._friction is not None:
+            f = self._friction
+            f.xi[:], f.body[:], f.force_old[:] = data["fr_xi"], data["fr_body"], data["fr_force"]
 
     # ------------------------------------------------------------------ controls
     @property
@@ -443,10 +480,14 @@ class LagrangeContact:
         """Residual of the bordered system at ``xv``: (r_u, gap, terms, |r_u free|, max|gap|,
         max|bc error|), all norms reduced over ranks."""
         n = self.n
+        t0 = time.perf_counter()
         self.model.residual(xv, f)
+        t1 = time.perf_counter()
         xa = xv.getArray(readonly=True)
         x = self.X + xa[: 3 * n].reshape(-1, 3)
         gap, nrm, force, col, kt_blocks, fr = self._contact_terms(x, nodes, lam)
+        self.timers["assembly"] += t1 - t0
+        self.timers["contact"] += time.perf_counter() - t1
         r = f.getArray(readonly=True).copy()
         urows = (3 * nodes[:, None] + np.arange(3)).ravel()
         np.add.at(r, urows, -force.ravel())
@@ -499,8 +540,13 @@ class LagrangeContact:
                 return True, its, lam, fr  # round-off floor reached
             if its == p.max_newton:
                 break
+            t0 = time.perf_counter()
             self._K = m.jacobian(xv, self._K)
+            t1 = time.perf_counter()
             B = self._bordered(self._K, nodes, col, -nrm, kt_blocks, bc_rows)
+            t2 = time.perf_counter()
+            self.timers["assembly"] += t1 - t0
+            self.timers["contact"] += t2 - t1
             rhs, sol = B.createVecs()
             ra = rhs.getArray()
             ra[: 5 * n] = -r
@@ -511,6 +557,7 @@ class LagrangeContact:
                 self._ksp_sizes = B.getSizes()
             self.ksp.setOperators(B)
             self.ksp.solve(rhs, sol)
+            self.timers["solve"] += time.perf_counter() - t2
             ok_solve = self.ksp.getConvergedReason() > 0
             s = sol.getArray(readonly=True).copy()
             B.destroy()
@@ -532,6 +579,15 @@ class LagrangeContact:
                 alpha *= 0.5
             r, gap, terms, fnorm, gmax, bcmax, merit = trial
             prev.append(fnorm)
+            log.debug(
+                "newton %d: |r| %.3e N (ref %.3e), max|gap| %.2e m, line search %.4g, %d active",
+                its + 1,
+                fnorm,
+                max(prev),
+                gmax,
+                used,
+                len(nodes),
+            )
             last_step = used * self.comm.allreduce(
                 float(np.max(np.abs(s[: 3 * n]))) if n else 0.0, op=MPI.MAX
             )

@@ -437,6 +437,32 @@ class ShellModel:
         self.update_director()  # collective (assembles P): every rank calls it
         return nodes
 
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """The rank-local state to checkpoint: u, theta (owned + ghost), the nodal fibre bases
+        (changed by :meth:`rebase`) and the load factor. Restore with :meth:`restore_arrays`
+        on the same mesh and number of ranks."""
+        return {
+            "u": self.u.x.array.copy(),
+            "theta": self.theta.x.array.copy(),
+            "basis": self.basis.copy(),
+            "load_factor": np.array(float(self.lam.value)),
+        }
+
+    def restore_arrays(self, data: dict[str, np.ndarray]) -> None:
+        """Inverse of :meth:`state_arrays` (collective: updates the directors)."""
+        for key, arr in (("u", self.u.x.array), ("theta", self.theta.x.array)):
+            if data[key].shape != arr.shape:
+                raise ValueError(
+                    f"checkpoint {key!r} has {data[key].shape[0]} local values, the model "
+                    f"{arr.shape[0]}: resume needs the same mesh and number of ranks"
+                )
+            arr[:] = data[key]
+        self.basis[:] = data["basis"]
+        for k, E in enumerate(self._fibre_e):
+            E.x.array.reshape(-1, 3)[:] = self.basis[:, k]
+        self.set_load_factor(float(data["load_factor"]))
+        self.update_director()
+
     def create_vector(self) -> PETSc.Vec:
         """A vector of the (u, theta) system."""
         return self._P.createVecRight()

@@ -1,0 +1,479 @@
+"""Shared plumbing of the arm-sleeve benchmark drivers (``arm_studies.py``, ``arm_ladder.py``,
+``arm_extreme.py``): one case = one ``clothfem run`` subprocess in its own folder.
+
+A case is a name plus a list of ``--set`` overrides of ``demos/scenes/arm_sleeve.toml``. Its
+folder ``OUT/<study>/<case>/`` holds what ``clothfem run`` writes (``history.csv``,
+``summary.json``, PNGs, XDMF) and what the driver adds: ``command.txt`` (the exact command),
+``stdout.log`` / ``stderr.log`` and ``case.json`` (exit status, wall time measured by the
+driver, the overrides). A case whose ``summary.json`` says ``completed`` with the same
+overrides is not run again unless ``force`` (so an interrupted study resumes where it
+stopped); while ``clothfem run`` does not write ``summary.json`` yet, ``case.json`` with exit
+status 0 stands in for it.
+
+:func:`case_result` reduces a case folder to one flat row (completed, reason, final angle,
+steps, cut-backs, max penetration, wall time, torques at given angles, peak torque, NaN/inf
+in the output); :class:`RowWriter` writes such rows to a CSV one at a time (flushed), and
+:func:`torque_plot` draws torque against angle for several cases (matplotlib Agg).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from clothfem.report import curve_error, read_history
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENE = ROOT / "demos" / "scenes" / "arm_sleeve.toml"
+HINGE = "body.1"  # the forearm segment of arm_sleeve.toml ([[body]] index 1)
+REPORT_ANGLES = (10, 20, 30, 40, 50, 57)  # deg: torque columns of the study tables
+
+__all__ = [
+    "ROOT",
+    "SCENE",
+    "REPORT_ANGLES",
+    "Case",
+    "RowWriter",
+    "add_common_args",
+    "angle_max_sets",
+    "case_result",
+    "curve_error",
+    "fmt",
+    "mesh_sets",
+    "set_arg",
+    "parse_mesh",
+    "read_history",
+    "run_cases",
+    "torque_curve",
+    "torque_plot",
+]
+
+
+@dataclass
+class Case:
+    """One run: ``name`` (its folder), ``sets`` (``key.path=value`` overrides, in order),
+    ``params`` (columns for the tables, e.g. ``{"mu": 0.5}``)."""
+
+    name: str
+    sets: list[str]
+    params: dict[str, Any] = field(default_factory=dict)
+    scene: Path = SCENE
+
+
+# ---------------------------------------------------------------------------------------------
+# command line
+
+
+def add_common_args(parser: argparse.ArgumentParser, *, default_out: str) -> None:
+    """Options every driver has: --out, --quick, --dry-run, --force, --only, --angle-max,
+    --extra-set, --timeout, --scene."""
+    parser.add_argument("--out", default=default_out, help="output folder (default %(default)s)")
+    parser.add_argument("--quick", action="store_true", help="fewer / coarser cases")
+    parser.add_argument(
+        "--dry-run", action="store_true", help="print the commands (and which would be skipped)"
+    )
+    parser.add_argument(
+        "--force", action="store_true", help="run again cases whose summary says completed"
+    )
+    parser.add_argument(
+        "--only", nargs="+", default=None, metavar="CASE", help="run only these case names"
+    )
+    parser.add_argument(
+        "--angle-max",
+        type=float,
+        default=None,
+        metavar="DEG",
+        help=f"override {HINGE}.angle_max (quick checks); contact.increments is scaled with it",
+    )
+    parser.add_argument(
+        "--extra-set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="extra --set for every case, after the case's own (repeatable), "
+        "e.g. solver.integrator=newmark",
+    )
+    parser.add_argument(
+        "--timeout",
+        type=float,
+        default=None,
+        metavar="S",
+        help="stop a case (SIGTERM) after S seconds of wall time and record it as not completed",
+    )
+    parser.add_argument("--scene", type=Path, default=SCENE, help="base scene (arm_sleeve.toml)")
+
+
+def parse_mesh(text: str) -> tuple[int, int]:
+    """``"16x20"`` -> (16, 20) (n_around, n_along)."""
+    try:
+        a, b = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"mesh must be NAxNL, e.g. 16x20, got {text!r}") from None
+    return a, b
+
+
+def set_arg(key: str, value: Any) -> str:
+    """``key=value`` for ``--set`` (value in TOML syntax; strings bare, e.g. newmark)."""
+    if isinstance(value, bool):
+        text = "true" if value else "false"
+    elif isinstance(value, float):
+        text = repr(value)
+    else:
+        text = str(value)
+    return f"{key}={text}"
+
+
+def mesh_sets(mesh: tuple[int, int]) -> list[str]:
+    return [set_arg("mesh.n_around", mesh[0]), set_arg("mesh.n_along", mesh[1])]
+
+
+def angle_max_sets(angle_max: float | None, scene: Path = SCENE) -> list[str]:
+    """Overrides for ``--angle-max``: the hinge's angle_max and, for the quasi-static path,
+    ``contact.increments`` scaled so that an increment stays the scene's size (1 deg)."""
+    if angle_max is None:
+        return []
+    out = [f"{HINGE}.angle_max={angle_max:g}"]
+    data = tomllib.loads(scene.read_text())
+    inc = data.get("contact", {}).get("increments")
+    a0 = data["body"][int(HINGE.split(".")[1])].get("angle_max")
+    if inc and a0:
+        out.append(f"contact.increments={max(1, math.ceil(inc * angle_max / a0 - 1e-9))}")
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# running a case
+
+
+def _command(case: Case, out: Path, extra: Sequence[str]) -> list[str]:
+    cmd = [sys.executable, "-m", "clothfem.cli", "run", str(case.scene), "--out", str(out)]
+    for s in [*case.sets, *extra]:
+        cmd += ["--set", s]
+    return cmd
+
+
+def _load_json(path: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _done_before(folder: Path, sets: list[str]) -> bool:
+    """True if the folder holds a completed run with the same overrides."""
+    rec = _load_json(folder / "case.json")
+    if rec is not None and rec.get("sets") != sets:
+        return False  # other overrides (e.g. another --angle-max): not the same case
+    summary = _load_json(folder / "summary.json")
+    if summary is not None:
+        return bool(summary.get("completed"))
+    return rec is not None and rec.get("returncode") == 0
+
+
+def _run(cmd: list[str], folder: Path, timeout: float | None) -> tuple[int, float, bool]:
+    """Run ``cmd`` in its own process group, logs to ``folder``; returns (exit status, wall
+    time, timed out). On timeout or Ctrl-C the child gets SIGTERM (clothfem closes its files
+    and keeps its rows), then SIGKILL after 60 s."""
+    t0 = time.perf_counter()
+    timed_out = False
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    with open(folder / "stdout.log", "w") as so, open(folder / "stderr.log", "w") as se:
+        proc = subprocess.Popen(cmd, stdout=so, stderr=se, cwd=ROOT, env=env, start_new_session=True)
+
+        def stop() -> None:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGTERM)
+                try:
+                    proc.wait(60)
+                except subprocess.TimeoutExpired:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                    proc.wait()
+
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            timed_out = True
+            stop()
+        except BaseException:  # Ctrl-C of the driver: stop the child cleanly, then re-raise
+            stop()
+            raise
+    return proc.returncode, time.perf_counter() - t0, timed_out
+
+
+def run_cases(
+    cases: Iterable[Case],
+    study_dir: Path,
+    args: argparse.Namespace,
+    *,
+    on_result=None,
+    settings: Sequence[str] = (),
+) -> list[dict[str, Any]]:
+    """Run (or skip, or with ``args.dry_run`` print) every case in ``study_dir/<case>/``;
+    ``settings`` are overrides common to the study (e.g. the mesh), put before the case's.
+    After each case, ``on_result(case, row)`` gets its :func:`case_result` row. Returns the
+    rows (dry run: empty)."""
+    rows = []
+    for case in cases:
+        if args.only and case.name not in args.only:
+            continue
+        case.sets = [*settings, *case.sets]
+        if args.scene != SCENE:
+            case.scene = args.scene
+        folder = study_dir / case.name
+        cmd = _command(case, folder, args.extra_set)
+        sets = [*case.sets, *args.extra_set]
+        skip = not args.force and _done_before(folder, sets)
+        if args.dry_run:
+            print(("# done, skipped: " if skip else "") + shlex.join(cmd))
+            continue
+        if skip:
+            print(f"[{study_dir.name}/{case.name}] completed before: skipped (--force reruns)")
+        else:
+            folder.mkdir(parents=True, exist_ok=True)
+            for stale in ("summary.json", "history.csv", "case.json"):
+                (folder / stale).unlink(missing_ok=True)
+            (folder / "command.txt").write_text(shlex.join(cmd) + "\n")
+            print(f"[{study_dir.name}/{case.name}] running ...", flush=True)
+            code, wall, timed_out = _run(cmd, folder, args.timeout)
+            rec = {"sets": sets, "returncode": code, "wall_s": wall, "timed_out": timed_out}
+            (folder / "case.json").write_text(json.dumps(rec, indent=1) + "\n")
+        row = {"case": case.name, **case.params, **case_result(folder)}
+        print(
+            f"[{study_dir.name}/{case.name}] completed {row['completed']}, "
+            f"final angle {fmt(row['final_angle_deg'])} deg, wall {fmt(row['wall_s'])} s"
+            + ("" if row["completed"] == "yes" else f" ({row['reason']})"),
+            flush=True,
+        )
+        rows.append(row)
+        if on_result is not None:
+            on_result(case, row)
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------
+# reading a case
+
+
+def _last_stderr_line(folder: Path) -> str:
+    try:
+        lines = [ln.strip() for ln in (folder / "stderr.log").read_text().splitlines()]
+    except OSError:
+        return ""
+    lines = [ln for ln in lines if ln]
+    return lines[-1] if lines else ""
+
+
+def _nan_in_csv(path: Path) -> bool:
+    """Any NaN or inf value in the CSV (any column)."""
+    try:
+        with path.open(newline="") as f:
+            for row in csv.reader(f):
+                for v in row:
+                    if v.strip().lower().lstrip("+-") in ("nan", "inf", "infinity"):
+                        return True
+    except OSError:
+        return False
+    return False
+
+
+def torque_curve(hist: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(angle in deg, |tau| in N m) of a history: the last settling row (the settled state
+    at 0 deg) and the motion rows, sorted by angle; the angle must increase along the
+    motion (repeated angles keep their last row)."""
+    if not hist or "angle_deg" not in hist or "torque_mag" not in hist:
+        return np.zeros(0), np.zeros(0)
+    stage = np.asarray(hist.get("stage", np.full(len(hist["angle_deg"]), "motion"))).astype(str)
+    angle = np.asarray(hist["angle_deg"], dtype=float)
+    torque = np.asarray(hist["torque_mag"], dtype=float)
+    keep = stage == "motion"
+    settle = np.flatnonzero(stage == "settle")
+    if settle.size:
+        keep[settle[-1]] = True
+    a, t = angle[keep], torque[keep]
+    ok = np.isfinite(a) & np.isfinite(t)
+    a, t = a[ok], t[ok]
+    order = np.argsort(a, kind="stable")
+    a, t = a[order], t[order]
+    last = np.r_[a[1:] != a[:-1], True] if a.size else np.zeros(0, dtype=bool)
+    return a[last], t[last]
+
+
+def case_result(folder: Path, angles: Sequence[float] = REPORT_ANGLES) -> dict[str, Any]:
+    """One flat row for a case folder: from ``summary.json`` where it exists, else from
+    ``history.csv`` and the exit status in ``case.json``."""
+    summary = _load_json(folder / "summary.json") or {}
+    rec = _load_json(folder / "case.json") or {}
+    hist_path = folder / "history.csv"
+    hist = {}
+    if hist_path.exists():
+        try:
+            hist = read_history(hist_path)
+        except Exception as exc:  # an unreadable CSV is a result too
+            hist = {}
+            summary.setdefault("reason", f"history.csv unreadable: {exc}")
+    a, t = torque_curve(hist)
+    code = rec.get("returncode")
+    completed = bool(summary["completed"]) if "completed" in summary else code == 0
+    if completed:
+        status = "yes"
+    elif rec.get("timed_out"):
+        status = "no"
+        summary["reason"] = f"timeout after {rec.get('wall_s', float('nan')):.0f} s"
+    else:
+        status = "no"
+    reason = summary.get("reason") or ("" if completed else _last_stderr_line(folder))
+    if not completed and not reason:
+        reason = f"exit status {code}" if code is not None else "not run"
+
+    def col(name: str) -> np.ndarray:
+        return np.asarray(hist.get(name, []), dtype=float)
+
+    def pick(key: str, fallback: float) -> float:
+        v = summary.get(key)
+        return float(v) if isinstance(v, int | float) and v is not None else fallback
+
+    stage = np.asarray(hist.get("stage", [])).astype(str)
+    elapsed = col("elapsed")
+    cut = col("cutbacks")
+    pen = col("max_penetration")
+    row: dict[str, Any] = {
+        "completed": status,
+        "reason": reason.replace("\n", " "),
+        "exit_status": code if code is not None else "",
+        "final_angle_deg": pick("final_angle_deg", float(a[-1]) if a.size else math.nan),
+        "steps": int(pick("steps", float((stage == "motion").sum()))),
+        "cutbacks": pick("cutbacks", float(np.nansum(cut)) if cut.size else math.nan),
+        "max_penetration_m": pick("max_penetration", float(np.nanmax(pen)) if pen.size else math.nan),
+        "wall_s": pick(
+            "wall_time",
+            float(elapsed[-1]) if elapsed.size else float(rec.get("wall_s", math.nan)),
+        ),
+        "driver_wall_s": float(rec.get("wall_s", math.nan)),
+    }
+    for ang in angles:
+        covered = a.size and a[0] - 1e-9 <= ang <= a[-1] + 1e-9
+        row[f"torque_at_{ang:g}deg"] = float(np.interp(ang, a, t)) if covered else math.nan
+    row["peak_torque"] = float(t.max()) if t.size else math.nan
+    row["nan_in_output"] = "yes" if _nan_in_csv(hist_path) else "no"
+    return row
+
+
+# ---------------------------------------------------------------------------------------------
+# tables and figures
+
+
+def fmt(v: Any) -> str:
+    """Table cell: 4 significant digits for floats, empty for NaN."""
+    if isinstance(v, float | np.floating):
+        return "" if math.isnan(v) else f"{v:.4g}"
+    return str(v)
+
+
+class RowWriter:
+    """A CSV written one row at a time (flushed). Columns are fixed by ``columns`` (rows may
+    lack some: empty cells); :meth:`rewrite` replaces the whole file (e.g. once columns that
+    need every case, like an error against the finest mesh, are known)."""
+
+    def __init__(self, path: Path, columns: Sequence[str]) -> None:
+        self.path, self.columns = Path(path), list(columns)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._f = self.path.open("w", newline="")
+        self._w = csv.DictWriter(self._f, fieldnames=self.columns, extrasaction="ignore")
+        self._w.writeheader()
+        self._f.flush()
+
+    def write(self, row: dict[str, Any]) -> None:
+        self._w.writerow({k: fmt(v) if isinstance(v, float) else v for k, v in row.items()})
+        self._f.flush()
+
+    def rewrite(self, rows: Iterable[dict[str, Any]]) -> None:
+        self._f.close()
+        self._f = self.path.open("w", newline="")
+        self._w = csv.DictWriter(self._f, fieldnames=self.columns, extrasaction="ignore")
+        self._w.writeheader()
+        for row in rows:
+            self.write(row)
+
+    def close(self) -> None:
+        self._f.close()
+
+
+def result_columns(angles: Sequence[float] = REPORT_ANGLES) -> list[str]:
+    return [
+        "completed",
+        "reason",
+        "exit_status",
+        "final_angle_deg",
+        *(f"torque_at_{a:g}deg" for a in angles),
+        "peak_torque",
+        "wall_s",
+        "driver_wall_s",
+        "steps",
+        "cutbacks",
+        "max_penetration_m",
+        "nan_in_output",
+    ]
+
+
+def torque_plot(
+    curves: Sequence[tuple[str, Path]],
+    png: Path,
+    *,
+    title: str,
+    logy: bool = False,
+) -> None:
+    """Torque |tau| against flexion angle, one line per (label, case folder)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.4))
+    drawn = 0
+    for label, folder in curves:
+        path = folder / "history.csv"
+        if not path.exists():
+            continue
+        try:
+            a, t = torque_curve(read_history(path))
+        except Exception:
+            continue
+        if logy:
+            a, t = a[t > 0], t[t > 0]
+        if a.size:
+            ax.plot(a, t, ".-", label=label)
+            drawn += 1
+    ax.set_xlabel("flexion angle [deg]")
+    ax.set_ylabel("torque about the elbow |tau| [N m]")
+    if logy:
+        ax.set_yscale("log")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.4)
+    if drawn:
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
+def markdown_table(rows: Sequence[dict[str, Any]], columns: Sequence[str]) -> str:
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for r in rows:
+        lines.append("| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,272 @@
+"""The five parameter studies of Man & Swan (2007), Sec. 4.1, on the arm-sleeve scene.
+
+Every case is one ``clothfem run demos/scenes/arm_sleeve.toml`` subprocess with ``--set``
+overrides, kept in ``OUT/<study>/<case>/`` (history.csv, summary.json, logs, PNGs). A case
+whose summary.json already says completed (same overrides) is skipped unless ``--force``,
+so an interrupted study resumes. One CSV per study, ``OUT/<study>.csv``, gets a row as each
+case finishes (case, parameters, completed, final angle, |tau| at 10/20/30/40/50/57 deg, peak
+torque, wall time, steps, cut-backs, max penetration); columns that need every case of the
+study (errors against the finest mesh, ratios) are filled in when the study ends.
+
+Studies (``--study``, default all):
+
+* ``mesh``: n_around x n_along = 8x10, 12x16, 16x20, 24x30 (``--quick``: 8x10, 12x16), each
+  at mu = 0.1 and 0.5 -> ``mesh_mu0.1.png``, ``mesh_mu0.5.png``; ``err_vs_finest`` = relative
+  L2 error (``clothfem.report.curve_error``) of |tau|(angle) against the finest mesh of the
+  same mu over [lo, A], A = the smallest final angle of the two runs, lo = min(2, A/2) deg
+  (both in the CSV);
+* ``friction``: mu = 0.1 vs 0.5 -> ``friction.png`` (the paper's Fig. 8);
+* ``fit``: sleeve radius 0.06 vs 0.07 m at mu = 0.5 -> ``fit.png``;
+* ``thickness``: t = 1 vs 2 mm at mu = 0.5 -> ``thickness.png``; ``ratio_at_<a>deg`` =
+  torque(t) / torque(1 mm) at 10..50 deg;
+* ``material``: sets I-III at mu = 0.1 (table MATERIALS below) -> ``material.png`` (log y);
+  ``torque_per_E_at_<a>deg`` = torque / E1 [N m / Pa].
+
+Studies b-e use the mesh ``--mesh`` (default 16x20, ``--quick`` 8x10). ``--angle-max DEG``
+overrides the forearm's angle_max (and scales contact.increments to keep 1-degree
+increments); ``--extra-set KEY=VALUE`` (repeatable) is passed to every case after its own
+overrides (e.g. ``--extra-set solver.integrator=static``); ``--only CASE ...`` runs only
+the named cases; ``--timeout S`` stops a case after S seconds.
+
+Run (with ``nice`` on a shared machine; full studies take hours):
+
+    nice -n 10 .venv/bin/python benchmarks/arm_studies.py --out results/arm-studies
+    nice -n 10 .venv/bin/python benchmarks/arm_studies.py --study friction fit --out results/arm-studies
+    .venv/bin/python benchmarks/arm_studies.py --dry-run --out results/arm-studies   # commands only
+
+Plumbing check measured 2026-11-22 (2 cores shared with another run, 8x10 mesh, 1 deg):
+
+    nice -n 10 .venv/bin/python benchmarks/arm_studies.py --study friction --quick \
+        --angle-max 1 --only mu0.1 --out /tmp/st
+
+static integrator: ~35 s per case (settling + one 1-degree increment); newmark (dt 0.01):
+see the note at the end of this docstring.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _arm_common import (  # noqa: E402
+    Case,
+    RowWriter,
+    add_common_args,
+    angle_max_sets,
+    case_result,
+    curve_error,
+    mesh_sets,
+    parse_mesh,
+    read_history,
+    result_columns,
+    run_cases,
+    torque_curve,
+    torque_plot,
+)
+
+STUDIES = ("mesh", "friction", "fit", "thickness", "material")
+MESHES = [(8, 10), (12, 16), (16, 20), (24, 30)]
+QUICK_MESHES = [(8, 10), (12, 16)]
+RATIO_ANGLES = (10, 20, 30, 40, 50)
+# Sec. 4.1.5 material sets: E1 = E2 = E, nu12 = 0. G12 = E / 200 for sets II and III; set I
+# keeps the paper's (and the scene preset's) G = 0.1 MPa. Edit here to change.
+MATERIALS = {
+    "I": dict(E=1.2e6, G12=1.0e5, rho=436.0),
+    "II": dict(E=350e6, G12=350e6 / 200, rho=436.0),
+    "III": dict(E=7.2e9, G12=7.2e9 / 200, rho=700.0),
+}
+
+
+def _mesh_name(m: tuple[int, int]) -> str:
+    return f"{m[0]}x{m[1]}"
+
+
+def study_cases(study: str, args: argparse.Namespace) -> list[Case]:
+    """The cases of one study (the study's default mesh is prepended by main)."""
+    if study == "mesh":
+        cases = []
+        for mu in (0.1, 0.5):
+            for m in QUICK_MESHES if args.quick else MESHES:
+                cases.append(
+                    Case(
+                        f"mu{mu:g}_{_mesh_name(m)}",
+                        [*mesh_sets(m), f"contact.mu={mu:g}"],
+                        {"n_around": m[0], "n_along": m[1], "mu": mu},
+                    )
+                )
+        return cases
+    if study == "friction":
+        return [Case(f"mu{mu:g}", [f"contact.mu={mu:g}"], {"mu": mu}) for mu in (0.1, 0.5)]
+    if study == "fit":
+        return [
+            Case(f"R{r:g}", [f"mesh.radius={r:g}", "contact.mu=0.5"], {"radius_m": r, "mu": 0.5})
+            for r in (0.06, 0.07)
+        ]
+    if study == "thickness":
+        return [
+            Case(
+                f"t{1e3 * t:g}mm",
+                [f"material.thickness={t:g}", "contact.mu=0.5"],
+                {"thickness_m": t, "mu": 0.5},
+            )
+            for t in (1e-3, 2e-3)
+        ]
+    if study == "material":
+        return [
+            Case(
+                f"set{name}",
+                [
+                    f"material.E1={m['E']:g}",
+                    f"material.E2={m['E']:g}",
+                    f"material.G12={m['G12']:g}",
+                    f"material.rho={m['rho']:g}",
+                    "contact.mu=0.1",
+                ],
+                {"set": name, "E_Pa": m["E"], "G12_Pa": m["G12"], "rho": m["rho"], "mu": 0.1},
+            )
+            for name, m in MATERIALS.items()
+        ]
+    raise ValueError(study)
+
+
+PARAMS = {
+    "mesh": ["n_around", "n_along", "mu"],
+    "friction": ["n_around", "n_along", "mu"],
+    "fit": ["n_around", "n_along", "radius_m", "mu"],
+    "thickness": ["n_around", "n_along", "thickness_m", "mu"],
+    "material": ["n_around", "n_along", "set", "E_Pa", "G12_Pa", "rho", "mu"],
+}
+EXTRA = {
+    "mesh": ["err_vs_finest", "err_lo_deg", "err_hi_deg", "finest"],
+    "thickness": [f"ratio_at_{a}deg" for a in RATIO_ANGLES],
+    "material": [f"torque_per_E_at_{a}deg" for a in (*RATIO_ANGLES, 57)],
+}
+
+
+def _curve(folder: Path):
+    try:
+        return torque_curve(read_history(folder / "history.csv"))
+    except Exception:
+        return None
+
+
+def compare(ref: Path, run: Path) -> tuple[float, float, float]:
+    """(error, lo, hi): curve_error of run against ref over [min(2, A/2), A], A = the
+    smallest final angle of the two; nan if a curve is missing or A <= 0."""
+    c_ref, c_run = _curve(ref), _curve(run)
+    if c_ref is None or c_run is None or not c_ref[0].size or not c_run[0].size:
+        return math.nan, math.nan, math.nan
+    hi = min(c_ref[0][-1], c_run[0][-1])
+    lo = min(2.0, 0.5 * hi)
+    if not hi > lo:
+        return math.nan, lo, hi
+    return curve_error(*c_ref, *c_run, lo=lo, hi=hi), lo, hi
+
+
+def post_process(study: str, rows: list[dict], study_dir: Path) -> None:
+    """Fill the columns that need every case of the study (in place)."""
+    by_name = {r["case"]: r for r in rows}
+    if study == "mesh":
+        for mu in (0.1, 0.5):
+            mine = [r for r in rows if r["mu"] == mu]
+            if not mine:
+                continue
+            finest = max(mine, key=lambda r: r["n_around"] * r["n_along"])
+            for r in mine:
+                err, lo, hi = compare(study_dir / finest["case"], study_dir / r["case"])
+                r.update(err_vs_finest=err, err_lo_deg=lo, err_hi_deg=hi, finest=finest["case"])
+    elif study == "thickness":
+        base = by_name.get("t1mm")
+        for r in rows:
+            for a in RATIO_ANGLES:
+                num, den = r[f"torque_at_{a}deg"], base[f"torque_at_{a}deg"] if base else math.nan
+                r[f"ratio_at_{a}deg"] = num / den if den and math.isfinite(den) else math.nan
+    elif study == "material":
+        for r in rows:
+            for a in (*RATIO_ANGLES, 57):
+                r[f"torque_per_E_at_{a}deg"] = r[f"torque_at_{a}deg"] / r["E_Pa"]
+
+
+def plots(study: str, cases: list[Case], study_dir: Path, out: Path, title_mesh: str) -> None:
+    def folder(c: Case) -> Path:
+        return study_dir / c.name
+
+    if study == "mesh":
+        for mu in (0.1, 0.5):
+            sel = [c for c in cases if c.params["mu"] == mu]
+            torque_plot(
+                [(f"{c.params['n_around']}x{c.params['n_along']}", folder(c)) for c in sel],
+                out / f"mesh_mu{mu:g}.png",
+                title=f"arm-sleeve: mesh study, mu = {mu:g}",
+            )
+        return
+    labels = {
+        "friction": lambda c: f"mu = {c.params['mu']:g}",
+        "fit": lambda c: f"sleeve radius {c.params['radius_m']:g} m",
+        "thickness": lambda c: f"t = {1e3 * c.params['thickness_m']:g} mm",
+        "material": lambda c: f"set {c.params['set']} (E = {c.params['E_Pa']:.3g} Pa)",
+    }
+    titles = {
+        "friction": "friction",
+        "fit": "fit (mu = 0.5)",
+        "thickness": "thickness (mu = 0.5)",
+        "material": "material sets (mu = 0.1)",
+    }
+    torque_plot(
+        [(labels[study](c), folder(c)) for c in cases],
+        out / f"{study}.png",
+        title=f"arm-sleeve: {titles[study]}, {title_mesh}",
+        logy=study == "material",
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_common_args(parser, default_out="results/arm-studies")
+    parser.add_argument("--study", nargs="+", choices=STUDIES, default=list(STUDIES))
+    parser.add_argument(
+        "--mesh",
+        type=parse_mesh,
+        default=None,
+        metavar="NAxNL",
+        help="mesh of studies friction..material (default 16x20, --quick 8x10)",
+    )
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    mesh = args.mesh or ((8, 10) if args.quick else (16, 20))
+    common = angle_max_sets(args.angle_max, args.scene)
+    for study in args.study:
+        cases = study_cases(study, args)
+        settings = list(common) if study == "mesh" else [*mesh_sets(mesh), *common]
+        if study != "mesh":
+            for c in cases:
+                c.params = {"n_around": mesh[0], "n_along": mesh[1], **c.params}
+        study_dir = out / study
+        if args.dry_run:
+            print(f"# study {study}: {len(cases)} case(s) in {study_dir}/")
+            run_cases(cases, study_dir, args, settings=settings)
+            continue
+        columns = ["case", *PARAMS[study], *result_columns(), *EXTRA.get(study, [])]
+        writer = RowWriter(out / f"{study}.csv", columns)
+        rows = run_cases(
+            cases, study_dir, args, settings=settings, on_result=lambda _c, r: writer.write(r)
+        )
+        if args.only:  # the table also lists earlier results of the cases not run now
+            names = {r["case"] for r in rows}
+            for c in cases:
+                if c.name not in names and (study_dir / c.name / "case.json").exists():
+                    rows.append({"case": c.name, **c.params, **case_result(study_dir / c.name)})
+        post_process(study, rows, study_dir)
+        writer.rewrite(rows)
+        writer.close()
+        plots(study, cases, study_dir, out, f"mesh {mesh[0]}x{mesh[1]}")
+        print(f"study {study}: {out / f'{study}.csv'}, figure(s) in {out}/")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,175 @@
+"""Post-processing of run folders: curve errors, interpolation, ``clothfem plot`` / ``report``.
+
+Synthetic run folders in ``tmp_path`` (one per process, so this also runs under mpirun).
+"""
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+from clothfem import report as R
+from clothfem.cli import main
+
+COLUMNS = ["stage", "time", "angle_deg", "torque_mag", "torque_flex", "n_active"]
+COLUMNS += ["max_penetration", "newton_iterations", "elapsed", "cutbacks"]
+COLUMNS += ["t_assembly", "t_solve", "t_contact", "t_io"]
+MOTION_ANGLES = [5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 40.0]
+
+
+def _run(folder, *, summary=None, columns=COLUMNS, tail=""):
+    """Run folder: settle at half load (0.5 N m) and full load (1 N m) at 0 deg, then a motion
+    to 40 deg with torque_mag = 1 + 0.1 angle and torque_flex = -torque_mag."""
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = [("settle", 0.0, 0.5), ("settle", 0.0, 1.0)]
+    rows += [("motion", a / 10, 1 + 0.1 * a) for a in MOTION_ANGLES]
+    with (folder / "history.csv").open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(columns)
+        for i, (stage, t, tau) in enumerate(rows):
+            angle = 10 * t
+            vals = dict(stage=stage, time=t, angle_deg=angle, torque_mag=tau, torque_flex=-tau)
+            vals.update(n_active=5, max_penetration=1e-9 * (i + 1), newton_iterations=4)
+            vals.update(elapsed=1.5 * (i + 1), cutbacks=1 if i == 3 else 0)
+            vals.update(t_assembly=1.0, t_solve=2.0, t_contact=1.0, t_io=0.0)
+            w.writerow([vals.get(c, "") for c in columns])
+        f.write(tail)
+    if summary is not None:
+        (folder / "summary.json").write_text(json.dumps(summary))
+    return folder
+
+
+STOPPED = {
+    "scene": "demo",
+    "completed": False,
+    "reason": "contact failed at 42 deg",
+    "final_angle_deg": 40.0,
+    "steps": 10,
+    "cutbacks": 3,
+    "wall_time": 12.5,
+}
+
+
+def test_curve_error_constant_offset_is_exact():
+    a = np.array([0.0, 20.0, 60.0])
+    e = R.curve_error(a, np.full(3, 2.0), a, np.full(3, 2.0 * 1.05), lo=0.0, hi=50.0)
+    assert e == pytest.approx(0.05, rel=1e-12)
+    assert R.curve_error(a, 3 * a, a, 6 * a, lo=10.0, hi=40.0) == pytest.approx(1.0, rel=1e-12)
+
+
+def test_curve_error_linear_ramp():
+    # tau_ref = alpha, tau = alpha + 1 on [10, 30]: sqrt(20 / ((30^3 - 10^3) / 3)) = 0.0480384
+    a = np.array([0.0, 30.0, 60.0])
+    e = R.curve_error(a, a, a[::-1], a[::-1] + 1.0, lo=10.0, hi=30.0)  # unsorted input is fine
+    assert e == pytest.approx(math.sqrt(20 / (26000 / 3)), rel=1e-4)  # trapezoid on 200 points
+    # on [0, H]: c sqrt(3) / H
+    assert R.curve_error(a, a, a, a + 2.0, lo=0.0, hi=60.0) == pytest.approx(
+        2 * math.sqrt(3) / 60, rel=1e-4
+    )
+
+
+def test_curve_error_not_covered_is_nan():
+    a, short = np.array([0.0, 60.0]), np.array([0.0, 40.0])
+    assert math.isnan(R.curve_error(a, a + 1, short, short + 1, lo=0.0, hi=57.0))
+    assert math.isnan(R.curve_error(short, short + 1, a, a + 1, lo=0.0, hi=57.0))
+    assert math.isnan(R.curve_error(a, a + 1, a[1:], a[1:], lo=0.0, hi=57.0))
+    assert R.curve_error(a, a + 1, a, a + 1, lo=0.0, hi=57.0) == 0.0
+    with pytest.raises(ValueError):
+        R.curve_error(a, a, a, a, lo=10.0, hi=10.0)
+
+
+def test_torque_at_interpolates_and_reports_unreached():
+    a = np.array([0.0, 10.0, 20.0, 56.99999999999])
+    t = np.array([1.0, 2.0, 4.0, 5.0])
+    assert R.torque_at(a, t, 15.0) == pytest.approx(3.0)
+    assert R.torque_at(a[::-1], t[::-1], 5.0) == pytest.approx(1.5)
+    assert R.torque_at(a, t, 57.0) == pytest.approx(5.0)  # round-off at the end is "reached"
+    assert R.torque_at(a, t, 57.1) is None and R.torque_at(a, t, -1.0) is None
+    assert R.torque_at(np.array([]), np.array([]), 0.0) is None
+
+
+def test_read_history_and_curve(tmp_path):
+    d = _run(tmp_path / "r", tail="motion,4.5,45.0,5")  # incomplete last line: dropped
+    h = R.read_history(d / "history.csv")
+    assert h["stage"].size == 10 and h["angle_deg"].dtype == float
+    a, tau = R.torque_curve(h)
+    assert a.tolist() == [0.0, *MOTION_ANGLES]  # the last settle row only
+    assert tau[0] == 1.0 and tau[-1] == pytest.approx(5.0)
+    assert R.torque_at(a, tau, 12.5) == pytest.approx(2.25)
+    assert R.torque_at(a, tau, 0.0) == 1.0
+
+
+def test_plot_one_run_default_path(tmp_path, capsys):
+    d = _run(tmp_path / "one", summary=STOPPED)
+    assert main(["plot", str(d), "--y", "torque_flex", "--title", "t"]) == 0
+    png = d / "torque_angle.png"
+    assert png.is_file() and png.stat().st_size > 0
+    assert capsys.readouterr().out.strip() == str(png)
+    assert R._stopped_note(R.read_history(d / "history.csv"), STOPPED) == " (stopped at 40.0 deg)"
+    assert R._stopped_note({}, {"completed": True}) == ""
+
+
+def test_plot_compare_in_cwd(tmp_path, monkeypatch, capsys):
+    a, b = _run(tmp_path / "a"), _run(tmp_path / "b", summary={"completed": False})
+    monkeypatch.chdir(tmp_path)
+    assert main(["plot", str(a), str(b), "--label", "A", "B"]) == 0
+    png = tmp_path / "torque_angle_compare.png"
+    assert png.is_file() and png.stat().st_size > 0
+    assert capsys.readouterr().out.strip() == "torque_angle_compare.png"
+    out = tmp_path / "sub" / "x.png"
+    assert main(["plot", str(a), str(b), "--label", "A", "--label", "B", "--out", str(out)]) == 0
+    assert out.is_file()
+    assert main(["plot", str(a), str(b), "--label", "A"]) == 2  # one label for two runs
+    assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_report_text(tmp_path, capsys):
+    d = _run(tmp_path / "run", summary=STOPPED)
+    md = tmp_path / "r.md"
+    assert main(["report", str(d), "--markdown", str(md)]) == 0
+    text = capsys.readouterr().out
+    assert md.read_text() == text
+    for expected in (
+        "# Run report: demo",
+        "status: stopped: contact failed at 42 deg",
+        "final angle: 40.00 deg",
+        "peak torque |tau|: 5 N m at 40.00 deg",
+        "steps: 10 (10 rows: 2 settle, 8 motion)",
+        "cut-backs: 3",
+        "max penetration: 1e-08 m",
+        "Newton iterations (total): 40",
+        "wall time: 12.5 s",
+        "assembly 25.0 %, solve 50.0 %, contact 25.0 %, io 0.0 %",
+        "| 0 | 1 | 1 |",
+        "| 10 | 2 | 2 |",
+        "| 20 | 3 | 3 |",
+        "| 50 | — | — |",
+        "| 57 | — | — |",
+    ):
+        assert expected in text, expected
+
+
+def test_report_without_summary_or_optional_columns(tmp_path, capsys):
+    required = ["stage", "time", "angle_deg", "torque_mag", "newton_iterations", "elapsed"]
+    d = _run(tmp_path / "bare", columns=required)
+    assert main(["report", str(d)]) == 0
+    text = capsys.readouterr().out
+    assert "# Run report: bare" in text and "status: unknown" in text
+    assert "wall time: 15.0 s" in text and "steps: 10 " in text
+    assert "cut-backs" not in text and "time shares" not in text and "penetration" not in text
+    assert "| 30 | 4 |" in text and "torque_flex" not in text
+
+
+def test_missing_history_and_malformed_csv(tmp_path, capsys):
+    missing = tmp_path / "nothing"
+    assert main(["report", str(missing)]) == 2
+    assert capsys.readouterr().err == f"clothfem: {missing / 'history.csv'} not found\n"
+    assert main(["plot", str(missing)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    bad = _run(tmp_path / "bad", columns=["stage", "time", "torque_mag"])
+    for cmd in ("report", "plot"):
+        assert main([cmd, str(bad)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "missing required column 'angle_deg'" in err
