@@ -44,6 +44,7 @@ HINGE = "body.1"  # the forearm segment of arm_sleeve.toml ([[body]] index 1)
 REPORT_ANGLES = (10, 20, 30, 40, 50, 57)  # deg: torque columns of the study tables
 
 __all__ = [
+    "HINGE",
     "ROOT",
     "SCENE",
     "REPORT_ANGLES",
@@ -54,10 +55,12 @@ __all__ = [
     "case_result",
     "curve_error",
     "fmt",
+    "markdown_table",
     "mesh_sets",
     "set_arg",
     "parse_mesh",
     "read_history",
+    "result_columns",
     "run_cases",
     "torque_curve",
     "torque_plot",
@@ -193,7 +196,9 @@ def _run(cmd: list[str], folder: Path, timeout: float | None) -> tuple[int, floa
     timed_out = False
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     with open(folder / "stdout.log", "w") as so, open(folder / "stderr.log", "w") as se:
-        proc = subprocess.Popen(cmd, stdout=so, stderr=se, cwd=ROOT, env=env, start_new_session=True)
+        proc = subprocess.Popen(
+            cmd, stdout=so, stderr=se, cwd=ROOT, env=env, start_new_session=True
+        )
 
         def stop() -> None:
             if proc.poll() is None:
@@ -225,16 +230,23 @@ def run_cases(
 ) -> list[dict[str, Any]]:
     """Run (or skip, or with ``args.dry_run`` print) every case in ``study_dir/<case>/``;
     ``settings`` are overrides common to the study (e.g. the mesh), put before the case's.
-    After each case, ``on_result(case, row)`` gets its :func:`case_result` row. Returns the
-    rows (dry run: empty)."""
+    After each case, ``on_result(case, row)`` gets its :func:`case_result` row. Cases left
+    out by ``--only`` contribute the rows of their earlier runs, if any. Returns the rows in
+    the order of ``cases`` (dry run: empty)."""
     rows = []
     for case in cases:
-        if args.only and case.name not in args.only:
-            continue
         case.sets = [*settings, *case.sets]
         if args.scene != SCENE:
             case.scene = args.scene
         folder = study_dir / case.name
+        if args.only and case.name not in args.only:
+            # not selected: its earlier result (if any) still goes into the tables
+            if not args.dry_run and (folder / "case.json").exists():
+                row = {"case": case.name, **case.params, **case_result(folder)}
+                rows.append(row)
+                if on_result is not None:
+                    on_result(case, row)
+            continue
         cmd = _command(case, folder, args.extra_set)
         sets = [*case.sets, *args.extra_set]
         skip = not args.force and _done_before(folder, sets)
@@ -251,6 +263,8 @@ def run_cases(
             print(f"[{study_dir.name}/{case.name}] running ...", flush=True)
             code, wall, timed_out = _run(cmd, folder, args.timeout)
             rec = {"sets": sets, "returncode": code, "wall_s": wall, "timed_out": timed_out}
+            if timed_out:
+                rec["timeout_s"] = args.timeout
             (folder / "case.json").write_text(json.dumps(rec, indent=1) + "\n")
         row = {"case": case.name, **case.params, **case_result(folder)}
         print(
@@ -333,7 +347,7 @@ def case_result(folder: Path, angles: Sequence[float] = REPORT_ANGLES) -> dict[s
         status = "yes"
     elif rec.get("timed_out"):
         status = "no"
-        summary["reason"] = f"timeout after {rec.get('wall_s', float('nan')):.0f} s"
+        summary["reason"] = f"stopped by the driver after --timeout {rec.get('timeout_s', 0):g} s"
     else:
         status = "no"
     reason = summary.get("reason") or ("" if completed else _last_stderr_line(folder))
@@ -358,7 +372,9 @@ def case_result(folder: Path, angles: Sequence[float] = REPORT_ANGLES) -> dict[s
         "final_angle_deg": pick("final_angle_deg", float(a[-1]) if a.size else math.nan),
         "steps": int(pick("steps", float((stage == "motion").sum()))),
         "cutbacks": pick("cutbacks", float(np.nansum(cut)) if cut.size else math.nan),
-        "max_penetration_m": pick("max_penetration", float(np.nanmax(pen)) if pen.size else math.nan),
+        "max_penetration_m": pick(
+            "max_penetration", float(np.nanmax(pen)) if pen.size else math.nan
+        ),
         "wall_s": pick(
             "wall_time",
             float(elapsed[-1]) if elapsed.size else float(rec.get("wall_s", math.nan)),
@@ -437,7 +453,8 @@ def torque_plot(
     title: str,
     logy: bool = False,
 ) -> None:
-    """Torque |tau| against flexion angle, one line per (label, case folder)."""
+    """Torque |tau| against flexion angle, one line per (label, case folder); runs that
+    stopped say where in their label. Folders without a history are left out."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -455,6 +472,9 @@ def torque_plot(
             continue
         if logy:
             a, t = a[t > 0], t[t > 0]
+        summary = _load_json(folder / "summary.json") or {}
+        if summary.get("completed") is False and a.size:
+            label += f" (stopped at {a[-1]:.3g} deg)"
         if a.size:
             ax.plot(a, t, ".-", label=label)
             drawn += 1

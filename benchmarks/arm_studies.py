@@ -1,4 +1,4 @@
-"""The five parameter studies of Man & Swan (2007), Sec. 4.1, on the arm-sleeve scene.
+r"""The five parameter studies of Man & Swan (2007), Sec. 4.1, on the arm-sleeve scene.
 
 Every case is one ``clothfem run demos/scenes/arm_sleeve.toml`` subprocess with ``--set``
 overrides, kept in ``OUT/<study>/<case>/`` (history.csv, summary.json, logs, PNGs). A case
@@ -19,7 +19,9 @@ Studies (``--study``, default all):
 * ``fit``: sleeve radius 0.06 vs 0.07 m at mu = 0.5 -> ``fit.png``;
 * ``thickness``: t = 1 vs 2 mm at mu = 0.5 -> ``thickness.png``; ``ratio_at_<a>deg`` =
   torque(t) / torque(1 mm) at 10..50 deg;
-* ``material``: sets I-III at mu = 0.1 (table MATERIALS below) -> ``material.png`` (log y);
+* ``material``: sets I-III at mu = 0.1 (table MATERIALS below: E = 1.2 MPa / 350 MPa /
+  7.2 GPa, rho = 436 / 436 / 700; G12 = E/200 for II and III, while set I keeps the
+  paper's G = 0.1 MPa, as the scene's crimped-cotton preset) -> ``material.png`` (log y);
   ``torque_per_E_at_<a>deg`` = torque / E1 [N m / Pa].
 
 Studies b-e use the mesh ``--mesh`` (default 16x20, ``--quick`` 8x10). ``--angle-max DEG``
@@ -31,16 +33,21 @@ the named cases; ``--timeout S`` stops a case after S seconds.
 Run (with ``nice`` on a shared machine; full studies take hours):
 
     nice -n 10 .venv/bin/python benchmarks/arm_studies.py --out results/arm-studies
-    nice -n 10 .venv/bin/python benchmarks/arm_studies.py --study friction fit --out results/arm-studies
+    nice -n 10 .venv/bin/python benchmarks/arm_studies.py --study friction fit \
+        --out results/arm-studies
     .venv/bin/python benchmarks/arm_studies.py --dry-run --out results/arm-studies   # commands only
 
-Plumbing check measured 2026-11-22 (2 cores shared with another run, 8x10 mesh, 1 deg):
+Plumbing check measured 2026-11-22 (2 cores shared with another run; 8x10 mesh, 1 degree;
+the scene's integrator was still static then):
 
     nice -n 10 .venv/bin/python benchmarks/arm_studies.py --study friction --quick \
-        --angle-max 1 --only mu0.1 --out /tmp/st
+        --angle-max 1 --only mu0.1 --out /tmp/st                       # static: 13 s
+    nice -n 10 .venv/bin/python benchmarks/arm_studies.py --study friction --quick \
+        --angle-max 1 --only mu0.5 --out /tmp/st \
+        --extra-set solver.integrator=newmark                          # newmark dt 0.01: 35 s
 
-static integrator: ~35 s per case (settling + one 1-degree increment); newmark (dt 0.01):
-see the note at the end of this docstring.
+(the Newmark run's cost is mostly the 0.2 s of dynamic settling, 23 steps). A full case
+on 16x20 to 57 degrees takes from minutes to an hour or more.
 """
 
 from __future__ import annotations
@@ -57,7 +64,6 @@ from _arm_common import (  # noqa: E402
     RowWriter,
     add_common_args,
     angle_max_sets,
-    case_result,
     curve_error,
     mesh_sets,
     parse_mesh,
@@ -253,13 +259,8 @@ def main(argv: list[str] | None = None) -> int:
         columns = ["case", *PARAMS[study], *result_columns(), *EXTRA.get(study, [])]
         writer = RowWriter(out / f"{study}.csv", columns)
         rows = run_cases(
-            cases, study_dir, args, settings=settings, on_result=lambda _c, r: writer.write(r)
+            cases, study_dir, args, settings=settings, on_result=lambda _c, r, w=writer: w.write(r)
         )
-        if args.only:  # the table also lists earlier results of the cases not run now
-            names = {r["case"] for r in rows}
-            for c in cases:
-                if c.name not in names and (study_dir / c.name / "case.json").exists():
-                    rows.append({"case": c.name, **c.params, **case_result(study_dir / c.name)})
         post_process(study, rows, study_dir)
         writer.rewrite(rows)
         writer.close()

@@ -33,6 +33,7 @@ from .shell import (
     PointForce,
     Prescribed,
     Pressure,
+    Quadrature,
     ShellModel,
     Symmetry,
 )
@@ -134,6 +135,10 @@ def build_model(
         loads=_loads(scene),
         supports=_supports(scene),
         warp=mat["warp"],
+        quadrature=Quadrature(
+            reduced=scene["element"]["reduced_quadrature"],
+            stabilization=scene["element"]["stabilization"],
+        ),
     )
     n_nodes = comm.allreduce(model.n_owned, op=MPI.SUM)
     n_cells = comm.allreduce(sm.mesh.topology.index_map(2).size_local, op=MPI.SUM)

@@ -183,6 +183,28 @@ SCHEMA: dict[str, Section] = {
             "point_force": ("point", "force"),
         },
     ),
+    "element": Section(
+        {
+            "reduced_quadrature": Key(
+                "int",
+                "quadrature degree of membrane and transverse shear (2: 2x2 Gauss points on "
+                "quadrilaterals, selective reduced integration; 4: full, 3x3)",
+                default=2,
+                lo=1,
+                hi=10,
+            ),
+            "stabilization": Key(
+                "float",
+                "alpha x the fully integrated membrane energy blended into the reduced one "
+                "(removes the spurious mode of reduced integration, stiffens ovalisation)",
+                default=0.0,
+                lo=0.0,
+                hi=1.0,
+            ),
+        },
+        "the shell element (clothfem.shell.Quadrature)",
+        optional=True,
+    ),
     "solver": Section(
         {
             "integrator": Key(

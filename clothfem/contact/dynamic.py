@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from petsc4py import PETSc
 
+from .geometry import closest_point_union
 from .lagrange import (
     ContactDivergence,
     ContactStepRecord,
@@ -102,7 +103,9 @@ class DynamicContact:
     velocities)`` (see :func:`clothfem.contact.film.body_state`).
 
     ``rebase`` [rad]: after every accepted step, nodes rotated by more than this are re-based
-    on their current director (:meth:`ShellSystem.rebase`); None never re-bases."""
+    on their current director (:meth:`ShellSystem.rebase`); None never re-bases.
+    ``non_resilient``: after every step the nodes in contact take the body's normal velocity
+    (:meth:`_stick_normal`); False keeps plain Newmark velocities."""
 
     def __init__(
         self,
@@ -114,13 +117,16 @@ class DynamicContact:
         gamma: float = 0.5,
         slaves=None,
         rebase: float | None = 0.5,
+        non_resilient: bool = True,
     ) -> None:
         if not (0 < beta <= 0.5):
             raise ValueError(f"DynamicContact beta must be in (0, 0.5], got {beta!r}")
         if not (0.5 <= gamma <= 1.0):
             raise ValueError(f"DynamicContact gamma must be in [0.5, 1], got {gamma!r}")
         self.system, self.beta, self.gamma = system, beta, gamma
-        self.rebase = rebase
+        self.rebase, self.non_resilient = rebase, non_resilient
+        self.h: float | None = None  # current step [s] (adaptive), set by run()
+        self.streak, self.grow_after = 0, 3
         self.bodies_at = bodies_at
         self.view = _InertialModel(system)
         geo, _ = bodies_at(0.0)
@@ -137,7 +143,7 @@ class DynamicContact:
     def state_arrays(self) -> dict:
         """Everything a resumed run needs (rank-local): time, x, v, a, the shell's and the
         contact solver's state."""
-        out = {"t": np.array(self.t)}
+        out = {"t": np.array(self.t), "h": np.array(self.h or 0.0), "streak": np.array(self.streak)}
         for k in ("x", "v", "a"):
             out[k] = getattr(self, k).getArray(readonly=True).copy()
         out.update({f"model_{k}": v for k, v in self.system.model.state_arrays().items()})
@@ -154,6 +160,8 @@ class DynamicContact:
                 raise ValueError("checkpoint does not match this mesh / number of ranks")
             arr[:] = data[k]
         self.t = float(data["t"])
+        self.h = float(data["h"]) or None
+        self.streak = int(data["streak"])
 
     def kinetic_energy(self) -> float:
         Mv = self.v.duplicate()
@@ -164,6 +172,32 @@ class DynamicContact:
         geo, _ = self.bodies_at(t)
         for k, (c, Q, r) in enumerate(geo):
             self.contact.set_pose(k, centre=c, axes=Q, radii=r)
+
+    def _stick_normal(self, t: float) -> None:
+        """Non-resilient contact (paper, end of Sec. 3.2): a node in contact moves with the
+        body surface along the normal, so its normal velocity relative to the body point is
+        set to zero and the normal part of its acceleration dropped. Without this, Newmark
+        carries the impact's velocity jump into the next predictor and the multipliers (and
+        the torque) oscillate from step to step."""
+        c = self.contact
+        act = np.flatnonzero(c.active)
+        if not len(act):
+            return
+        n = c.n
+        x = c.X[act] + self.x.getArray(readonly=True)[: 3 * n].reshape(n, 3)[act]
+        pr = closest_point_union(x, c.bodies)
+        _, vel = self.bodies_at(t)
+        vb = np.array(
+            [
+                vel[b][0] + np.cross(vel[b][1], p - c.bodies[b][0])
+                for b, p in zip(pr.body, pr.point, strict=True)
+            ]
+        )
+        nrm = pr.normal
+        for vec, target in ((self.v, vb), (self.a, np.zeros_like(vb))):
+            arr = vec.getArray()[: 3 * n].reshape(n, 3)
+            rel = np.einsum("ij,ij->i", arr[act] - target, nrm)
+            arr[act] -= rel[:, None] * nrm
 
     def step(self, dt: float, lam: float) -> ContactStepRecord:
         """Advance by ``dt`` [s] at load factor ``lam`` (raises ContactDivergence, state kept)."""
@@ -189,6 +223,8 @@ class DynamicContact:
         a_new.copy(self.a)
         x_new.copy(self.x)
         self.t += dt
+        if self.non_resilient:
+            self._stick_normal(self.t)
         if self.rebase is not None:  # keep |theta| away from pi at folds (ShellModel.rebase)
             self.system.rebase(self.x, self.v, self.a, threshold=self.rebase)
         return rec
@@ -202,14 +238,18 @@ class DynamicContact:
         load: Callable[[float], float] = lambda t: 1.0,
         on_step: Callable[[DynamicContactRecord], None] | None = None,
     ) -> list[DynamicContactRecord]:
-        """Step to ``t_end`` [s] with ``dt`` [s]; halve dt on failure down to ``dt_min``
-        (default dt / 64), then raise ContactDivergence (accepted steps went to on_step)."""
+        """Step to ``t_end`` [s] with steps of at most ``dt`` [s]; halve the step on failure
+        down to ``dt_min`` (default dt / 64), then raise ContactDivergence (accepted steps
+        went to on_step). A halved step is kept and doubled again after ``grow_after``
+        steps without a failure."""
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0 s, got {dt!r}")
         dt_min = dt / 64 if dt_min is None else dt_min
+        if self.h is None:
+            self.h = dt
         records, step = [], 0
         while self.t < t_end - 1e-12 * t_end:
-            h, cut = min(dt, t_end - self.t), 0
+            h, cut = min(self.h, dt, t_end - self.t), 0
             while True:
                 try:
                     rec = self.step(h, load(self.t + h))
@@ -223,6 +263,11 @@ class DynamicContact:
                             f"dynamic contact failed at t = {self.t:.6g} s with dt below "
                             f"dt_min = {dt_min:.3g} s"
                         ) from exc
+            # keep a cut step; double it again after `grow_after` steps without a cut
+            self.streak = 0 if cut else self.streak + 1
+            self.h = h
+            if self.streak >= self.grow_after and self.h < dt:
+                self.h, self.streak = min(2 * self.h, dt), 0
             step += 1
             r = DynamicContactRecord(
                 step, self.t, h, rec, self.kinetic_energy(), self.system.strain_energy(), cut

@@ -120,6 +120,11 @@ class LagrangeContactParameters:
     newton_stol: ... or when ``max|du| <= newton_stol * L`` with L the mesh size (in (0, 1)).
     max_newton: Newton iterations per active-set pass (>= 1).
     max_active_set: active-set passes per step (>= 1).
+    semismooth_passes: in the first this many passes (>= 0) the active set is updated as soon
+        as a Newton iterate penetrates or pulls (primal-dual active set / semismooth Newton:
+        no Newton solve to convergence with a set that is already known to be wrong); later
+        passes converge Newton with a fixed set (the paper's trial-and-error procedure),
+        which cannot cycle inside Newton. 0: always the latter.
     prefix: PETSc options prefix of the bordered linear solve.
     """
 
@@ -131,6 +136,7 @@ class LagrangeContactParameters:
     newton_stol: float = 1e-11
     max_newton: int = 50
     max_active_set: int = 30
+    semismooth_passes: int = 5
     prefix: str = "contact_lagrange_"
 
     def __post_init__(self) -> None:
@@ -153,6 +159,10 @@ class LagrangeContactParameters:
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 1):
                 raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+        if not (isinstance(self.semismooth_passes, int) and self.semismooth_passes >= 0):
+            raise ValueError(
+                f"semismooth_passes must be an integer >= 0, got {self.semismooth_passes!r}"
+            )
         if not (isinstance(self.prefix, str) and self.prefix and " " not in self.prefix):
             raise ValueError(
                 f"prefix must be a non-empty PETSc options prefix, got {self.prefix!r}"
@@ -504,7 +514,7 @@ class LagrangeContact:
         merit = math.sqrt(fnorm**2 + self.stiffness_scale**2 * g2)
         return r, gap, (nrm, col, kt_blocks, fr), fnorm, gmax, bcmax, merit
 
-    def _newton(self, xv: PETSc.Vec, nodes, lam, bc_rows, bc_vals):
+    def _newton(self, xv: PETSc.Vec, nodes, lam, bc_rows, bc_vals, set_changed=None):
         """Newton on the bordered system with the active set ``nodes`` fixed, with a
         backtracking line search on the merit of :meth:`_evaluate` (needed at stick/slip
         transitions, where the return map makes the residual only piecewise smooth, and where
@@ -595,6 +605,9 @@ class LagrangeContact:
             stalled = stalled + 1 if used < 1.0 / 16.0 else 0
             if stalled >= 4:
                 return False, its + 1, lam, terms[3]
+            # semismooth variant: leave as soon as the iterate says the set is wrong
+            if set_changed is not None and set_changed(xv, lam):
+                return True, its + 1, lam, terms[3]
         return False, its, lam, terms[3]
 
     def solve_step(self, lam_load: float) -> ContactStepRecord:
@@ -625,10 +638,30 @@ class LagrangeContact:
         lam_nodes = np.where(active, self.lam, 0.0)
         newton_total, sets = 0, 0
         fr = None
+
+        def changes_of(xv: PETSc.Vec, nodes, lam_a) -> tuple[NDArray, NDArray, int]:
+            """Nodes to release (tensile multiplier) and to add (penetrating), and their
+            number over all ranks."""
+            lam_all = np.zeros(n)
+            lam_all[nodes] = lam_a
+            x = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
+            gap = closest_point_union(x, self.bodies).gap if n else np.zeros(0)
+            lam_max = self.comm.allreduce(
+                float(np.max(np.abs(lam_a))) if len(lam_a) else 0.0, op=MPI.MAX
+            )
+            drop = active & (lam_all < -p.multiplier_tolerance * lam_max)
+            add = ~active & can_touch & (gap < -self.gap_tol)
+            return drop, add, self.comm.allreduce(int(drop.sum() + add.sum()), op=MPI.SUM)
+
         while True:
             sets += 1
             nodes = np.flatnonzero(active)
-            ok, its, lam_a, fr = self._newton(xv, nodes, lam_nodes[nodes], bc_rows, bc_vals)
+            early = None
+            if p.semismooth_passes >= sets:  # the set may change inside Newton (semismooth)
+                early = lambda xv, lam_a, nodes=nodes: changes_of(xv, nodes, lam_a)[2] > 0  # noqa: E731
+            ok, its, lam_a, fr = self._newton(
+                xv, nodes, lam_nodes[nodes], bc_rows, bc_vals, set_changed=early
+            )
             newton_total += its
             if not ok:
                 self._restore(saved_u, saved_t, saved_active, saved_lam)
@@ -640,14 +673,8 @@ class LagrangeContact:
             lam_nodes[nodes] = lam_a
             x = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
             gap = closest_point_union(x, self.bodies).gap if n else np.zeros(0)
-            lam_max = self.comm.allreduce(
-                float(np.max(np.abs(lam_a))) if len(lam_a) else 0.0, op=MPI.MAX
-            )
-            ltol = p.multiplier_tolerance * lam_max
-            drop = active & (lam_nodes < -ltol)
-            add = ~active & can_touch & (gap < -self.gap_tol)
-            changes = self.comm.allreduce(int(drop.sum() + add.sum()), op=MPI.SUM)
-            if changes == 0:
+            drop, add, changes = changes_of(xv, nodes, lam_a)
+            if changes == 0:  # (an early exit always has changes: same test)
                 break
             if sets >= p.max_active_set:
                 self._restore(saved_u, saved_t, saved_active, saved_lam)

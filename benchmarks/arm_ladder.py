@@ -1,0 +1,317 @@
+r"""Error against run time on the arm-sleeve scene: a ladder of discretisation settings.
+
+Each rung of LADDER (below: a dict of ``--set`` overrides on top of BASE) is one
+``clothfem run demos/scenes/arm_sleeve.toml`` subprocess in ``OUT/ladder/<name>/``; a rung
+whose summary.json already says completed (same overrides) is skipped unless ``--force``.
+The rungs vary one thing at a time around BASE (16x20 quadratic mesh, Newmark gamma 0.6,
+dt = 0.01 s): the mesh (8x10, 12x16, 16x20, 24x30), the geometry order (mesh.order 1 vs 2),
+the time step (solver.dt 0.02, 0.01, 0.005) and the integrator (static vs newmark).
+
+**Reference** = the rung marked ``"reference": True``: the finest setting, 24x30 quadratic
+mesh with Newmark dt = 0.005 s (``--quick``: 12x16, dt = 0.005 s).
+
+**Error** = ``clothfem.report.curve_error`` of |tau| (torque_mag) against the angle, relative
+L2 over [2, A] deg, where A is the largest angle every compared run reached: the smallest
+final angle of the reference and of the rungs that completed (if no rung completed: of all
+rungs); ``--angle A`` sets it. Rungs that stopped before A are listed with their reached
+angle and no error. If A <= 2 deg (quick checks) the range is [A/2, A]. Wall time = summary
+wall_time (else the last ``elapsed`` of history.csv).
+
+Outputs: ``OUT/ladder.csv`` (a row as each rung finishes; the error columns are filled when
+the ladder ends), ``OUT/ladder.md`` (table), ``OUT/ladder.png`` (log-log error vs wall time,
+points labelled); printed: the cheapest rung within 5 %, 2 % and 1 % of the reference.
+
+Run (full ladder: hours on 2 cores):
+
+    nice -n 10 .venv/bin/python benchmarks/arm_ladder.py --out results/arm-ladder
+    .venv/bin/python benchmarks/arm_ladder.py --dry-run --out results/arm-ladder
+
+Plumbing check measured 2026-11-22 (2 cores shared with another run; 8x10, 1 degree),
+one rung at a time:
+
+    nice -n 10 .venv/bin/python benchmarks/arm_ladder.py --quick --angle-max 1 \
+        --only static --out /tmp/ladder                                # 8 s
+    nice -n 10 .venv/bin/python benchmarks/arm_ladder.py --quick --angle-max 1 \
+        --only base8x10 --out /tmp/ladder                              # newmark: 21 s
+
+(the Newmark rungs' cost at 1 degree is mostly the 0.2 s of dynamic settling). Other
+options: ``--extra-set KEY=VALUE`` (every rung, after its own overrides), ``--timeout S``
+per rung, ``--angle-max DEG``, ``--only NAME ...``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _arm_common import (  # noqa: E402
+    Case,
+    RowWriter,
+    add_common_args,
+    angle_max_sets,
+    curve_error,
+    fmt,
+    markdown_table,
+    read_history,
+    run_cases,
+    set_arg,
+    torque_curve,
+)
+
+# --- the ladder (edit here) -------------------------------------------------------------------
+# BASE: overrides of every rung; a rung: "name", optional "reference": True, other keys are
+# scene keys (--set paths) replacing BASE's.
+BASE: dict[str, Any] = {
+    "mesh.n_around": 16,
+    "mesh.n_along": 20,
+    "mesh.order": 2,
+    "solver.integrator": "newmark",
+    "solver.dt": 0.01,
+}
+LADDER: list[dict[str, Any]] = [
+    {"name": "mesh8x10", "mesh.n_around": 8, "mesh.n_along": 10},
+    {"name": "mesh12x16", "mesh.n_around": 12, "mesh.n_along": 16},
+    {"name": "base16x20"},  # = BASE: mesh 16x20, order 2, newmark dt 0.01
+    {"name": "mesh24x30", "mesh.n_around": 24, "mesh.n_along": 30},
+    {"name": "order1", "mesh.order": 1},
+    {"name": "dt0.02", "solver.dt": 0.02},
+    {"name": "dt0.005", "solver.dt": 0.005},
+    {"name": "static", "solver.integrator": "static"},
+    {
+        "name": "ref24x30_dt0.005",
+        "reference": True,
+        "mesh.n_around": 24,
+        "mesh.n_along": 30,
+        "solver.dt": 0.005,
+    },
+]
+QUICK_BASE: dict[str, Any] = {**BASE, "mesh.n_around": 8, "mesh.n_along": 10}
+QUICK_LADDER: list[dict[str, Any]] = [
+    {"name": "static", "solver.integrator": "static"},
+    {"name": "order1", "mesh.order": 1},
+    {"name": "dt0.02", "solver.dt": 0.02},
+    {"name": "base8x10"},
+    {
+        "name": "ref12x16_dt0.005",
+        "reference": True,
+        "mesh.n_around": 12,
+        "mesh.n_along": 16,
+        "solver.dt": 0.005,
+    },
+]
+LO = 2.0  # deg: start of the compared range (skips the start-up transient of the motion)
+THRESHOLDS = (0.05, 0.02, 0.01)
+
+
+def rung_cases(base: dict[str, Any], ladder: list[dict[str, Any]]) -> tuple[list[Case], str]:
+    """(cases, name of the reference) of a ladder."""
+    cases = []
+    ref = next((r["name"] for r in ladder if r.get("reference")), ladder[-1]["name"])
+    for rung in ladder:
+        keys = {k: v for k, v in rung.items() if k not in ("name", "reference")}
+        merged = {**base, **keys}
+        if merged.get("solver.integrator") == "static":
+            merged.pop("solver.dt", None)  # a Newmark-only key
+        changed = "; ".join(f"{k}={v}" for k, v in keys.items()) or "base"
+        params = {
+            "reference": "yes" if rung["name"] == ref else "",
+            "settings": changed,
+            "mesh": f"{merged.get('mesh.n_around', '?')}x{merged.get('mesh.n_along', '?')}",
+            "order": merged.get("mesh.order", ""),
+            "integrator": merged.get("solver.integrator", ""),
+            "dt_s": merged.get("solver.dt", "")
+            if merged.get("solver.integrator") != "static"
+            else "",
+        }
+        cases.append(Case(rung["name"], [set_arg(k, v) for k, v in merged.items()], params))
+    return cases, ref
+
+
+COLUMNS = [
+    "case",
+    "reference",
+    "settings",
+    "mesh",
+    "order",
+    "integrator",
+    "dt_s",
+    "completed",
+    "reason",
+    "final_angle_deg",
+    "error",
+    "err_lo_deg",
+    "err_hi_deg",
+    "wall_s",
+    "steps",
+    "cutbacks",
+    "max_penetration_m",
+    "nan_in_output",
+]
+MD_COLUMNS = [
+    "case",
+    "settings",
+    "completed",
+    "final_angle_deg",
+    "error",
+    "wall_s",
+    "steps",
+    "cutbacks",
+]
+
+
+def compare_angle(rows: list[dict], ref: str, given: float | None) -> float:
+    """A: ``given``, else the smallest final angle of the reference and the completed rungs
+    (if no other rung completed: of all rungs with a result)."""
+    if given is not None:
+        return given
+    reached = {r["case"]: r["final_angle_deg"] for r in rows if math.isfinite(r["final_angle_deg"])}
+    if ref not in reached:
+        return math.nan
+    others = [r for r in rows if r["case"] != ref and r["case"] in reached]
+    pool = [r for r in others if r["completed"] == "yes"] or others
+    return min([reached[ref], *(reached[r["case"]] for r in pool)])
+
+
+def add_errors(rows: list[dict], ref: str, study_dir: Path, angle: float) -> None:
+    """Fill error / err_lo_deg / err_hi_deg (in place)."""
+    lo = LO if angle > LO else 0.5 * angle
+    curves = {}
+    for r in rows:
+        try:
+            curves[r["case"]] = torque_curve(read_history(study_dir / r["case"] / "history.csv"))
+        except Exception:
+            curves[r["case"]] = None
+    for r in rows:
+        r.update(error=math.nan, err_lo_deg=lo, err_hi_deg=angle)
+        c, c_ref = curves.get(r["case"]), curves.get(ref)
+        if not (math.isfinite(angle) and angle > lo) or c is None or c_ref is None:
+            continue
+        if r["final_angle_deg"] < angle - 1e-6:
+            r["reason"] = (r["reason"] + "; " if r["reason"] else "") + (
+                f"did not reach A = {angle:g} deg (reached {r['final_angle_deg']:.3g}): no error"
+            )
+            continue
+        r["error"] = 0.0 if r["case"] == ref else curve_error(*c_ref, *c, lo=lo, hi=angle)
+
+
+def cheapest(rows: list[dict], ref: str) -> list[str]:
+    out = []
+    for tol in THRESHOLDS:
+        ok = [
+            r for r in rows if r["case"] != ref and math.isfinite(r["error"]) and r["error"] <= tol
+        ]
+        if ok:
+            best = min(ok, key=lambda r: r["wall_s"] if math.isfinite(r["wall_s"]) else math.inf)
+            out.append(
+                f"within {100 * tol:g} %: {best['case']} ({best['settings']}), error "
+                f"{100 * best['error']:.2f} %, {fmt(best['wall_s'])} s"
+            )
+        else:
+            out.append(f"within {100 * tol:g} %: none of the rungs")
+    return out
+
+
+def plot(rows: list[dict], ref: str, angle: float, lo: float, png: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    pts = [
+        r
+        for r in rows
+        if r["case"] != ref
+        and math.isfinite(r["error"])
+        and r["error"] > 0
+        and math.isfinite(r["wall_s"])
+    ]
+    for r in pts:
+        ax.plot(r["wall_s"], r["error"], "o", color="C0")
+        ax.annotate(
+            r["case"],
+            (r["wall_s"], r["error"]),
+            fontsize=8,
+            xytext=(4, 3),
+            textcoords="offset points",
+        )
+    for tol in THRESHOLDS:
+        ax.axhline(tol, color="0.6", lw=0.8, ls="--")
+    ref_row = next((r for r in rows if r["case"] == ref), None)
+    if ref_row is not None and math.isfinite(ref_row["wall_s"]):
+        ax.axvline(ref_row["wall_s"], color="C3", lw=0.8, ls=":", label=f"reference {ref}")
+        ax.legend(fontsize=8)
+    if pts:
+        ax.margins(x=0.2, y=0.2)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+    ax.set_xlabel("wall time [s]")
+    ax.set_ylabel(f"relative L2 error of |tau| over [{lo:g}, {angle:.3g}] deg")
+    ax.set_title("arm-sleeve: error against run time")
+    ax.grid(True, which="both", alpha=0.4)
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_common_args(parser, default_out="results/arm-ladder")
+    parser.add_argument(
+        "--angle",
+        type=float,
+        default=None,
+        metavar="A",
+        help="compare over [2, A] deg (default: the largest angle every compared run reached)",
+    )
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    base, ladder = (QUICK_BASE, QUICK_LADDER) if args.quick else (BASE, LADDER)
+    cases, ref = rung_cases(base, ladder)
+    study_dir = out / "ladder"
+    settings = angle_max_sets(args.angle_max, args.scene)
+    if args.dry_run:
+        print(f"# ladder: {len(cases)} rung(s) in {study_dir}/, reference {ref}")
+        run_cases(cases, study_dir, args, settings=settings)
+        return 0
+    writer = RowWriter(out / "ladder.csv", COLUMNS)
+    rows = run_cases(
+        cases, study_dir, args, settings=settings, on_result=lambda _c, r: writer.write(r)
+    )
+    angle = compare_angle(rows, ref, args.angle)
+    add_errors(rows, ref, study_dir, angle)
+    lo = rows[0]["err_lo_deg"] if rows else LO
+    writer.rewrite(rows)
+    writer.close()
+    ref_row = next((r for r in rows if r["case"] == ref), None)
+    head = [
+        "# Arm-sleeve ladder: error against wall time",
+        "",
+        f"- reference: **{ref}** ({ref_row['settings'] if ref_row else 'not run'}), "
+        f"BASE = {', '.join(f'{k}={v}' for k, v in base.items())}",
+        f"- error: relative L2 of |tau|(angle) against the reference over [{lo:g}, {angle:.4g}]"
+        " deg (A = the smallest final angle of the reference and the completed rungs)",
+        "",
+    ]
+    verdict = cheapest(rows, ref)
+    text = "\n".join(head) + markdown_table(rows, MD_COLUMNS) + "\n"
+    text += "".join(f"- cheapest {v}\n" for v in verdict)
+    (out / "ladder.md").write_text(text)
+    plot(rows, ref, angle, lo, out / "ladder.png")
+    if math.isfinite(angle):
+        print(f"reference {ref}; compared over [{lo:g}, {angle:.4g}] deg")
+    else:
+        print(f"reference {ref} has no result (not run, or no rows): no errors")
+    for v in verdict:
+        print("cheapest " + v)
+    print(f"written: {out / 'ladder.csv'}, {out / 'ladder.md'}, {out / 'ladder.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
