@@ -26,6 +26,13 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--out", default=None, help="output folder (default results/<scene name>)")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     run.add_argument(
+        "-v",
+        "--verbose",
+        action="count",
+        default=0,
+        help="log solver details (-v: step failures, -vv: every Newton iteration)",
+    )
+    run.add_argument(
         "--resume",
         action="store_true",
         help="continue a newmark run from the last checkpoint in --out (same number of ranks)",
@@ -68,6 +75,11 @@ def main(argv: list[str] | None = None) -> int:
     from .run import RunStopped, run_scene
     from .static import SolverDivergence
 
+    if args.verbose:
+        import logging
+
+        logging.basicConfig(format="%(name)s: %(message)s")
+        logging.getLogger("clothfem").setLevel(logging.INFO if args.verbose == 1 else logging.DEBUG)
     out = Path(args.out or Path("results") / scene["scene"]["name"])
     try:
         run_scene(scene, out, resume=args.resume)

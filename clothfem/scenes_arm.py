@@ -37,7 +37,6 @@ from mpi4py import MPI
 
 from .body import FixedMotion, HingeMotion
 from .contact.forces import joint_torque
-from .contact.geometry import closest_point_union
 from .contact.lagrange import ContactDivergence, LagrangeContact, LagrangeContactParameters
 from .io import ResultWriter, rank0_print, snapshot_png
 from .scene import SceneError
@@ -325,11 +324,10 @@ def run_contact_scene(
     def torque() -> np.ndarray:
         if c["aj"] != "touching":
             return contact.torque(J, nodes=aj)
-        st = contact.state()
-        tau = np.zeros(3)
-        if contact.n:
-            on = st.active & (closest_point_union(st.x, contact.bodies).body == k_torque)
-            tau = joint_torque(st.x, st.force_on_body, J, nodes=on)
+        nodes, body, f_pairs, _ = contact.pair_forces()
+        on = body == k_torque
+        x = contact.X + model.u.x.array[: 3 * contact.n].reshape(-1, 3)
+        tau = joint_torque(x[nodes[on]], -f_pairs[on], J) if on.any() else np.zeros(3)
         return comm.allreduce(tau, op=MPI.SUM)
 
     def snapshot(tag: str) -> None:

@@ -27,7 +27,6 @@ from dataclasses import dataclass
 import numpy as np
 from petsc4py import PETSc
 
-from .geometry import closest_point_union
 from .lagrange import (
     ContactDivergence,
     ContactStepRecord,
@@ -180,24 +179,23 @@ class DynamicContact:
         carries the impact's velocity jump into the next predictor and the multipliers (and
         the torque) oscillate from step to step."""
         c = self.contact
-        act = np.flatnonzero(c.active)
-        if not len(act):
+        nodes, body, _, nrm = c.pair_forces()
+        if not len(nodes):
             return
         n = c.n
-        x = c.X[act] + self.x.getArray(readonly=True)[: 3 * n].reshape(n, 3)[act]
-        pr = closest_point_union(x, c.bodies)
         _, vel = self.bodies_at(t)
+        x = c.X[nodes] + self.x.getArray(readonly=True)[: 3 * n].reshape(n, 3)[nodes]
         vb = np.array(
             [
                 vel[b][0] + np.cross(vel[b][1], p - c.bodies[b][0])
-                for b, p in zip(pr.body, pr.point, strict=True)
+                for b, p in zip(body, x, strict=True)
             ]
         )
-        nrm = pr.normal
         for vec, target in ((self.v, vb), (self.a, np.zeros_like(vb))):
             arr = vec.getArray()[: 3 * n].reshape(n, 3)
-            rel = np.einsum("ij,ij->i", arr[act] - target, nrm)
-            arr[act] -= rel[:, None] * nrm
+            for j in range(len(nodes)):  # one pair at a time: a crease node has two normals
+                i = nodes[j]
+                arr[i] -= ((arr[i] - target[j]) @ nrm[j]) * nrm[j]
 
     def step(self, dt: float, lam: float) -> ContactStepRecord:
         """Advance by ``dt`` [s] at load factor ``lam`` (raises ContactDivergence, state kept)."""

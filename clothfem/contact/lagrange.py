@@ -9,11 +9,16 @@ Formulation
 Slave nodes are the fabric nodes (all nodes of the shell's ``u`` space, quadratic elements
 included); the master surface is the union of rigid ellipsoids given as ``(c, Q, r)`` triples
 (axes as **columns**; ``clothfem.body.Ellipsoid`` gives ``(e.centre, e.axes.T, e.radii)``).
-For an active node ``i`` the constraint is ``gap_i(x_i) = (x_i - p_i) . n_i = 0`` with the exact
-closest point ``p_i`` and outward normal ``n_i`` of
-:func:`~clothfem.contact.geometry.closest_point_union`.  Since ``d gap / d x = n`` for an exact
-projection, the constraint row is ``G_i = n_i^T`` on the three ``u`` dofs of node ``i``
-(Eq. 21 with a rigid master: the master dofs are prescribed, not unknowns).
+Being outside the union means being outside every ellipsoid, so the constraints are per
+(node, ellipsoid) pair: for an active pair ``(i, k)`` the constraint is
+``gap_ik(x_i) = (x_i - p_ik) . n_ik = 0`` with the exact closest point ``p_ik`` and outward
+normal ``n_ik`` of ellipsoid ``k`` (:func:`~clothfem.contact.geometry.closest_point_ellipsoid`).
+Each gap is smooth; projecting on the union instead switches a node between ellipsoids in the
+concave crease where two of them meet (the elbow), and Newton then cycles (measured on the
+arm-sleeve scene at 33 degrees of flexion). A node in the crease has two constraints.
+Since ``d gap / d x = n`` for an exact projection, the constraint row is ``G_ik = n_ik^T`` on
+the three ``u`` dofs of node ``i`` (Eq. 21 with a rigid master: the master dofs are
+prescribed, not unknowns).
 
 Per Newton iteration we solve the bordered (saddle-point) system
 
@@ -84,7 +89,6 @@ from .geometry import (
     EllipsoidData,
     _check_bodies,
     closest_point_ellipsoid,
-    closest_point_union,
 )
 
 __all__ = [
@@ -271,17 +275,22 @@ class LagrangeContact:
         if slaves is not None:
             self.slave = np.asarray(slaves(self.X.T.copy()), dtype=bool)[:n]
         # state: multipliers on the active set (stored per node), friction history
-        self.active = np.zeros(n, dtype=bool)
-        self.lam = np.zeros(n)
+        # one constraint per (node, ellipsoid) pair: outside the union = outside every
+        # ellipsoid, and each ellipsoid's gap is smooth (a union projection switches body
+        # in the concave crease between two ellipsoids, and Newton cycles there)
+        self.nb = len(self.bodies)
+        self._act = np.zeros((n, self.nb), dtype=bool)
+        self._lam = np.zeros((n, self.nb))
         self.step_count = 0
         self.dissipation_total = 0.0
         self._friction: _FrictionState | None = None
         if params.mu > 0:
             kt = params.tangential_penalty
             kt = kt if kt is not None else 100.0 * max(mat.E1, mat.E2) * t
-            self._friction = _FrictionState(n, params.mu, kt)
-            self._friction.commit(self._positions(), self.bodies, np.zeros((n, 3)))
-        self._last_friction = np.zeros((n, 3))
+            self._friction = _FrictionState(n, self.nb, params.mu, kt)
+            self._friction.commit(self._positions(), self.bodies, np.zeros((n * self.nb, 3)))
+        self._last_friction = np.zeros((n, 3))  # per node [N]
+        self._last_friction_pairs = np.zeros((n * self.nb, 3))
         self._build_solver()
         self._build_area_forms()
         self._K: PETSc.Mat | None = None
@@ -294,31 +303,73 @@ class LagrangeContact:
         """Rank-local contact state to checkpoint (active set, multipliers, friction history,
         body poses, counters); restore with :meth:`restore_arrays` on the same ranks."""
         out = {
-            "active": self.active.copy(),
-            "lam": self.lam.copy(),
-            "last_friction": self._last_friction.copy(),
+            "active": self._act.copy(),
+            "lam": self._lam.copy(),
+            "last_friction": self._last_friction_pairs.copy(),
             "counters": np.array([self.step_count, self.dissipation_total]),
         }
         for k, (c, Q, r) in enumerate(self.bodies):
             out[f"body{k}"] = np.concatenate([c, Q.ravel(), r])
         if self._friction is not None:
             f = self._friction
-            out.update(fr_xi=f.xi.copy(), fr_body=f.body.copy(), fr_force=f.force_old.copy())
+            out.update(fr_xi=f.xi.copy(), fr_force=f.force_old.copy())
         return out
 
     def restore_arrays(self, data: dict[str, np.ndarray]) -> None:
         """Inverse of :meth:`state_arrays`."""
-        if data["active"].shape != self.active.shape:
+        if data["active"].shape != self._act.shape:
             raise ValueError("checkpoint contact state does not match this mesh / rank count")
-        self.active[:], self.lam[:] = data["active"], data["lam"]
-        self._last_friction[:] = data["last_friction"]
+        self._act[:], self._lam[:] = data["active"], data["lam"]
+        self._last_friction_pairs[:] = data["last_friction"]
+        self._last_friction[:] = 0.0
+        pair_node = np.arange(self.n * self.nb) // self.nb
+        np.add.at(self._last_friction, pair_node, data["last_friction"])
         self.step_count, self.dissipation_total = int(data["counters"][0]), data["counters"][1]
         for k in range(len(self.bodies)):
             b = data[f"body{k}"]
             self.set_pose(k, centre=b[:3], axes=b[3:12].reshape(3, 3), radii=b[12:])
         if self._friction is not None:
             f = self._friction
-            f.xi[:], f.body[:], f.force_old[:] = data["fr_xi"], data["fr_body"], data["fr_force"]
+            f.xi[:], f.force_old[:] = data["fr_xi"], data["fr_force"]
+
+    @property
+    def active(self) -> NDArray[np.bool_]:
+        """Nodes in contact with at least one ellipsoid (owned nodes)."""
+        return self._act.any(axis=1)
+
+    @property
+    def lam(self) -> FloatArray:
+        """Normal multiplier per node in N (sum over the ellipsoids it touches)."""
+        return np.where(self._act, self._lam, 0.0).sum(axis=1)
+
+    def _project_pairs(self, x: FloatArray, pairs: NDArray[np.intp]):
+        """Gap, outward normal and closest point of node ``pairs // nb`` (positions ``x`` of
+        all owned nodes) on ellipsoid ``pairs % nb``."""
+        nodes, body = pairs // self.nb, pairs % self.nb
+        m = len(pairs)
+        gap, nrm, point = np.zeros(m), np.zeros((m, 3)), np.zeros((m, 3))
+        for k, (c, Q, r) in enumerate(self.bodies):
+            sel = np.flatnonzero(body == k)
+            if sel.size:
+                pr = closest_point_ellipsoid(x[nodes[sel]], c, Q, r)
+                gap[sel], nrm[sel], point[sel] = pr.gap, pr.normal, pr.point
+        return nodes, body, gap, nrm, point
+
+    def _gaps(self, x: FloatArray) -> FloatArray:
+        """Signed gap of every owned node to every ellipsoid, (n, nb) [m]."""
+        out = np.zeros((len(x), self.nb))
+        for k, (c, Q, r) in enumerate(self.bodies):
+            if len(x):
+                out[:, k] = closest_point_ellipsoid(x, c, Q, r).gap
+        return out
+
+    def pair_forces(self):
+        """Active (node, ellipsoid) pairs at the last converged step: (nodes, body index,
+        force on the fabric [N] (normal multiplier plus friction), outward normal)."""
+        pairs = np.flatnonzero(self._act.ravel())
+        nodes, body, _, nrm, _ = self._project_pairs(self._positions(), pairs)
+        f = self._lam.ravel()[pairs][:, None] * nrm + self._last_friction_pairs[pairs]
+        return nodes, body, f, nrm
 
     # ------------------------------------------------------------------ controls
     @property
@@ -462,15 +513,9 @@ class LagrangeContact:
         B.assemble()
         return B
 
-    def _contact_terms(self, x: FloatArray, nodes: NDArray[np.intp], lam: FloatArray):
-        """Gap, normal and friction terms of the active nodes at positions ``x``."""
-        m = len(nodes)
-        if m:
-            pr = closest_point_union(x[nodes], self.bodies)
-            gap, nrm, body, point = pr.gap, pr.normal, pr.body, pr.point
-        else:
-            gap, nrm, body = np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=np.intp)
-            point = np.zeros((0, 3))
+    def _contact_terms(self, x: FloatArray, pairs: NDArray[np.intp], lam: FloatArray):
+        """Gap, normal and friction terms of the active (node, ellipsoid) pairs at ``x``."""
+        _, body, gap, nrm, point = self._project_pairs(x, pairs)
         force = lam[:, None] * nrm
         col = -nrm.copy()
         # curvature of the constraint: d(lam n)/dx = lam W (I + gap W)^-1 P with W the
@@ -478,7 +523,7 @@ class LagrangeContact:
         blocks = -lam[:, None, None] * _weingarten(point, nrm, gap, body, self.bodies)
         fr = None
         if self._friction is not None:
-            fr = self._friction.evaluate(point, nodes, nrm, body, lam, self.bodies)
+            fr = self._friction.evaluate(point, pairs, nrm, body, lam, self.bodies)
             force = force + fr.force
             col = col - fr.dforce_dlam
             blocks = blocks + fr.tangent
@@ -486,7 +531,7 @@ class LagrangeContact:
         return gap, nrm, force, col, kt_blocks, fr
 
     # ------------------------------------------------------------------ solve
-    def _evaluate(self, xv: PETSc.Vec, f: PETSc.Vec, nodes, lam, bc_rows, bc_vals, free):
+    def _evaluate(self, xv: PETSc.Vec, f: PETSc.Vec, pairs, lam, bc_rows, bc_vals, free):
         """Residual of the bordered system at ``xv``: (r_u, gap, terms, |r_u free|, max|gap|,
         max|bc error|), all norms reduced over ranks."""
         n = self.n
@@ -495,7 +540,8 @@ class LagrangeContact:
         t1 = time.perf_counter()
         xa = xv.getArray(readonly=True)
         x = self.X + xa[: 3 * n].reshape(-1, 3)
-        gap, nrm, force, col, kt_blocks, fr = self._contact_terms(x, nodes, lam)
+        gap, nrm, force, col, kt_blocks, fr = self._contact_terms(x, pairs, lam)
+        nodes = pairs // self.nb
         self.timers["assembly"] += t1 - t0
         self.timers["contact"] += time.perf_counter() - t1
         r = f.getArray(readonly=True).copy()
@@ -515,7 +561,8 @@ class LagrangeContact:
         return r, gap, (nrm, col, kt_blocks, fr), fnorm, gmax, bcmax, merit
 
     def _newton(self, xv: PETSc.Vec, nodes, lam, bc_rows, bc_vals, set_changed=None):
-        """Newton on the bordered system with the active set ``nodes`` fixed, with a
+        """Newton on the bordered system with the active (node, ellipsoid) pairs ``nodes``
+        (flat indices node * nb + body) fixed, with a
         backtracking line search on the merit of :meth:`_evaluate` (needed at stick/slip
         transitions, where the return map makes the residual only piecewise smooth, and where
         released fabric wrinkles).
@@ -553,7 +600,7 @@ class LagrangeContact:
             t0 = time.perf_counter()
             self._K = m.jacobian(xv, self._K)
             t1 = time.perf_counter()
-            B = self._bordered(self._K, nodes, col, -nrm, kt_blocks, bc_rows)
+            B = self._bordered(self._K, nodes // self.nb, col, -nrm, kt_blocks, bc_rows)
             t2 = time.perf_counter()
             self.timers["assembly"] += t1 - t0
             self.timers["contact"] += t2 - t1
@@ -620,60 +667,57 @@ class LagrangeContact:
         m, p = self.model, self.params
         n = self.n
         saved_u, saved_t = m.u.x.array.copy(), m.theta.x.array.copy()
-        saved_active, saved_lam = self.active.copy(), self.lam.copy()
+        saved_active, saved_lam = self._act.copy(), self._lam.copy()
         m.set_load_factor(lam_load)
         bc_rows, bc_vals = m.bc_rows_and_values(lam_load)
         fixed = np.zeros(3 * n, dtype=int)
         ub = bc_rows[bc_rows < 3 * n]
         fixed[ub] = 1
-        can_touch = self.slave & (fixed.reshape(-1, 3).sum(axis=1) < 3)
+        can_touch = (self.slave & (fixed.reshape(-1, 3).sum(axis=1) < 3))[:, None]
         xv = m.create_vector()
         m.get_state(xv)
         xv.getArray()[bc_rows] = bc_vals
-        active = self.active & can_touch
-        # predictor: activate the nodes that the prescribed motions made penetrate
+        active = self._act & can_touch  # (n, nb): node i against ellipsoid k
+        # predictor: activate the pairs that the prescribed motions made penetrate
         x0 = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
-        gap0 = closest_point_union(x0, self.bodies).gap if n else np.zeros(0)
-        active |= can_touch & (gap0 < -self.gap_tol)
-        lam_nodes = np.where(active, self.lam, 0.0)
+        active |= can_touch & (self._gaps(x0) < -self.gap_tol)
+        lam_pairs = np.where(active, self._lam, 0.0).ravel()
         newton_total, sets = 0, 0
         fr = None
 
-        def changes_of(xv: PETSc.Vec, nodes, lam_a) -> tuple[NDArray, NDArray, int]:
-            """Nodes to release (tensile multiplier) and to add (penetrating), and their
+        def changes_of(xv: PETSc.Vec, pairs, lam_a) -> tuple[NDArray, NDArray, int]:
+            """Pairs to release (tensile multiplier) and to add (penetrating), and their
             number over all ranks."""
-            lam_all = np.zeros(n)
-            lam_all[nodes] = lam_a
+            lam_all = np.zeros(n * self.nb)
+            lam_all[pairs] = lam_a
             x = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
-            gap = closest_point_union(x, self.bodies).gap if n else np.zeros(0)
+            gap = self._gaps(x)
             lam_max = self.comm.allreduce(
                 float(np.max(np.abs(lam_a))) if len(lam_a) else 0.0, op=MPI.MAX
             )
-            drop = active & (lam_all < -p.multiplier_tolerance * lam_max)
+            drop = active & (lam_all.reshape(n, self.nb) < -p.multiplier_tolerance * lam_max)
             add = ~active & can_touch & (gap < -self.gap_tol)
             return drop, add, self.comm.allreduce(int(drop.sum() + add.sum()), op=MPI.SUM)
 
         while True:
             sets += 1
-            nodes = np.flatnonzero(active)
+            pairs = np.flatnonzero(active.ravel())
             early = None
             if p.semismooth_passes >= sets:  # the set may change inside Newton (semismooth)
-                early = lambda xv, lam_a, nodes=nodes: changes_of(xv, nodes, lam_a)[2] > 0  # noqa: E731
+                early = lambda xv, lam_a, pairs=pairs: changes_of(xv, pairs, lam_a)[2] > 0  # noqa: E731
             ok, its, lam_a, fr = self._newton(
-                xv, nodes, lam_nodes[nodes], bc_rows, bc_vals, set_changed=early
+                xv, pairs, lam_pairs[pairs], bc_rows, bc_vals, set_changed=early
             )
             newton_total += its
             if not ok:
                 self._restore(saved_u, saved_t, saved_active, saved_lam)
                 raise ContactDivergence(
                     f"Newton failed at load factor {lam_load:.6g} in active-set pass {sets} "
-                    f"({len(nodes)} active nodes on rank {self.comm.rank})"
+                    f"({len(pairs)} active node-ellipsoid pairs on rank {self.comm.rank})"
                 )
-            lam_nodes[:] = 0.0
-            lam_nodes[nodes] = lam_a
-            x = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
-            gap = closest_point_union(x, self.bodies).gap if n else np.zeros(0)
-            drop, add, changes = changes_of(xv, nodes, lam_a)
+            lam_pairs[:] = 0.0
+            lam_pairs[pairs] = lam_a
+            drop, add, changes = changes_of(xv, pairs, lam_a)
             if changes == 0:  # (an early exit always has changes: same test)
                 break
             if sets >= p.max_active_set:
@@ -683,28 +727,31 @@ class LagrangeContact:
                     f"{lam_load:.6g} ({changes} changes)"
                 )
             active = (active & ~drop) | add
-            lam_nodes[drop] = 0.0
+            lam_pairs[drop.ravel()] = 0.0
         # commit
         m.set_state(xv)
-        self.active, self.lam = active, lam_nodes
+        x = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
+        gap = self._gaps(x)
+        self._act, self._lam = active, lam_pairs.reshape(n, self.nb)
         self.step_count += 1
         n_stick = n_slip = 0
         diss = 0.0
-        friction = np.zeros((n, 3))
+        friction = np.zeros((n * self.nb, 3))
         if self._friction is not None and fr is not None:
-            friction[nodes] = fr.force
+            friction[pairs] = fr.force
             n_stick = self.comm.allreduce(int(fr.stick.sum()), op=MPI.SUM)
             n_slip = self.comm.allreduce(int((~fr.stick).sum()), op=MPI.SUM)
             diss = self.comm.allreduce(float(fr.dissipation.sum()), op=MPI.SUM)
             self._friction.commit(x, self.bodies, friction)
-        self._last_friction = friction
+        self._last_friction_pairs = friction
+        self._last_friction = friction.reshape(n, self.nb, 3).sum(axis=1)
         self.dissipation_total += diss
-        d = diagnostics(gap, lam_nodes, active=active)
-        n_act = self.comm.allreduce(d.n_active, op=MPI.SUM)
+        d = diagnostics(gap.ravel(), lam_pairs, active=active.ravel())
+        n_act = self.comm.allreduce(int(active.any(axis=1).sum()), op=MPI.SUM)
         pen = self.comm.allreduce(d.max_penetration, op=MPI.MAX)
         lmin = self.comm.allreduce(d.min_multiplier if d.n_active else np.inf, op=MPI.MIN)
         comp = self.comm.allreduce(d.complementarity, op=MPI.MAX)
-        total = self.comm.allreduce(float(lam_nodes.sum()), op=MPI.SUM)
+        total = self.comm.allreduce(float(lam_pairs.sum()), op=MPI.SUM)
         return ContactStepRecord(
             self.step_count,
             float(lam_load),
@@ -787,23 +834,28 @@ class LagrangeContact:
         m.u.x.array[:] = u
         m.theta.x.array[:] = th
         m.update_director()
-        self.active, self.lam = active, lam
+        self._act, self._lam = active, lam
 
     # ------------------------------------------------------------------ outputs
     def state(self) -> ContactState:
-        """Contact state of the owned nodes at the last converged step (collective: areas)."""
+        """Contact state of the owned nodes at the last converged step (collective: areas).
+        Per node: gap = smallest over the ellipsoids; lam_n = sum of its multipliers;
+        normal = direction of its normal force (a node in the crease between two ellipsoids
+        has two constraints)."""
         n = self.n
         x = self._positions()
-        pr = closest_point_union(x, self.bodies) if n else None
-        gap = pr.gap if n else np.zeros(0)
-        normal = np.zeros((n, 3))
-        normal[self.active] = pr.normal[self.active]
-        lam = np.where(self.active, self.lam, 0.0)
-        fric = self._last_friction
-        f = lam[:, None] * normal + fric
+        gap = self._gaps(x).min(axis=1) if self.nb else np.full(n, np.inf)
+        nodes, _, f_pairs, nrm = self.pair_forces()
+        lam_p = self._lam.ravel()[np.flatnonzero(self._act.ravel())]
+        fn = np.zeros((n, 3))
+        np.add.at(fn, nodes, lam_p[:, None] * nrm)
+        mag = np.linalg.norm(fn, axis=1)
+        normal = np.where(mag[:, None] > 0, fn / np.maximum(mag, 1e-300)[:, None], 0.0)
+        lam = self.lam
+        f = fn + self._last_friction
         area = self.lumped_area()
         return ContactState(
-            x, gap, self.active.copy(), lam, normal, fric.copy(), f, -f, area, lam / area
+            x, gap, self.active, lam, normal, self._last_friction.copy(), f, -f, area, lam / area
         )
 
     def resultant(self) -> FloatArray:
@@ -829,11 +881,10 @@ class LagrangeContact:
         f = xv.duplicate()
         m.residual(xv, f)
         r = f.getArray(readonly=True).copy()
-        s_force = np.where(self.active, self.lam, 0.0)
-        x = self._positions()
         if self.n:
-            nrm = closest_point_union(x, self.bodies).normal
-            fc = s_force[:, None] * nrm * self.active[:, None] + self._last_friction
+            nodes, _, f_pairs, _ = self.pair_forces()
+            fc = np.zeros((self.n, 3))
+            np.add.at(fc, nodes, f_pairs)
             r[: 3 * self.n] -= fc.ravel()
         return rows, r[rows]
 
@@ -868,42 +919,39 @@ class _FrictionEval:
 
 
 class _FrictionState:
-    """History of the regularised Coulomb law: body-local contact points and old forces.
+    """History of the regularised Coulomb law per (node, ellipsoid) pair: body-local
+    coordinates of the last contact point and the old friction force.
 
     Only created when mu > 0.
     """
 
-    def __init__(self, n: int, mu: float, kt: float) -> None:
-        self.mu, self.kt = mu, kt
-        self.xi = np.zeros((n, 3))  # body-local coordinates of the last contact point
-        self.body = np.full(n, -1, dtype=np.intp)
-        self.force_old = np.zeros((n, 3))
+    def __init__(self, n: int, nb: int, mu: float, kt: float) -> None:
+        self.mu, self.kt, self.nb = mu, kt, nb
+        self.xi = np.zeros((n * nb, 3))  # body-local coordinates of the last contact point
+        self.force_old = np.zeros((n * nb, 3))
 
     def commit(self, x: FloatArray, bodies, force: FloatArray) -> None:
+        """Anchor every pair at the closest point of its ellipsoid; ``force`` (n * nb, 3)."""
         if len(x) == 0:
             return
-        pr = closest_point_union(x, bodies)
-        self.body[:] = pr.body
-        for k, (c, Q, _) in enumerate(bodies):
-            sel = pr.body == k
-            self.xi[sel] = (pr.point[sel] - c) @ Q
+        xi = self.xi.reshape(len(x), self.nb, 3)
+        for k, (c, Q, r) in enumerate(bodies):
+            xi[:, k] = (closest_point_ellipsoid(x, c, Q, r).point - c) @ Q
         self.force_old[:] = force
 
-    def evaluate(self, point, nodes, nrm, body, lam, bodies) -> _FrictionEval:
-        m = len(nodes)
+    def evaluate(self, point, pairs, nrm, body, lam, bodies) -> _FrictionEval:
+        m = len(pairs)
         P = np.eye(3)[None] - nrm[:, :, None] * nrm[:, None, :]
         anchor = np.empty((m, 3))
-        same = self.body[nodes] == body
         for k, (c, Q, r) in enumerate(bodies):
             sel = np.flatnonzero(body == k)
             if sel.size:
                 # the body material point touched at the last converged step, carried with
                 # the body and put back on its (possibly resized) surface
-                moved = c + self.xi[nodes[sel]] @ Q.T
+                moved = c + self.xi[pairs[sel]] @ Q.T
                 anchor[sel] = closest_point_ellipsoid(moved, c, Q, r).point
         du = np.einsum("nij,nj->ni", P, point - anchor)
-        du[~same] = 0.0
-        f_old = np.where(same[:, None], self.force_old[nodes], 0.0)
+        f_old = self.force_old[pairs]
         trial = np.einsum("nij,nj->ni", P, f_old) - self.kt * du
         lam_pos = np.maximum(lam, 0.0)
         rm = coulomb_return_map(lam_pos, trial, self.mu, penalty=self.kt)
