@@ -240,6 +240,13 @@ SCHEMA: dict[str, Section] = {
                 lo=0.5,
                 hi=1.0,
             ),
+            "rotary_scale": Key(
+                "float",
+                "newmark: factor >= 1 on the rotary inertia rho t^3/12 of the director (mass "
+                "scaling; 1 = physical)",
+                default=1.0,
+                lo=1.0,
+            ),
             "settle_time": Key(
                 "float",
                 "newmark: time [s] with the body at rest before the motion starts (settling)",

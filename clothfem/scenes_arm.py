@@ -512,7 +512,7 @@ def _run_dynamic(
 
     gamma = sv["gamma"]
     dc = DynamicContact(
-        ShellSystem(model),
+        ShellSystem(model, rotary_scale=sv["rotary_scale"]),
         bodies_at,
         params=LagrangeContactParameters(mu=c["mu"]),
         beta=(gamma + 0.5) ** 2 / 4,

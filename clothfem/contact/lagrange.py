@@ -678,9 +678,14 @@ class LagrangeContact:
         m.get_state(xv)
         xv.getArray()[bc_rows] = bc_vals
         active = self._act & can_touch  # (n, nb): node i against ellipsoid k
-        # predictor: activate the pairs that the prescribed motions made penetrate
+        # predictor: activate the nodes that the prescribed motions made penetrate (on their
+        # most penetrated ellipsoid; see changes_of)
         x0 = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
-        active |= can_touch & (self._gaps(x0) < -self.gap_tol)
+        g0 = self._gaps(x0)
+        if n and self.nb:
+            k0 = np.argmin(g0, axis=1)
+            new = can_touch[:, 0] & ~active.any(axis=1) & (g0[np.arange(n), k0] < -self.gap_tol)
+            active[np.flatnonzero(new), k0[new]] = True
         lam_pairs = np.where(active, self._lam, 0.0).ravel()
         newton_total, sets = 0, 0
         fr = None
@@ -696,7 +701,20 @@ class LagrangeContact:
                 float(np.max(np.abs(lam_a))) if len(lam_a) else 0.0, op=MPI.MAX
             )
             drop = active & (lam_all.reshape(n, self.nb) < -p.multiplier_tolerance * lam_max)
-            add = ~active & can_touch & (gap < -self.gap_tol)
+            # one constraint per node, on its most penetrated ellipsoid (the union rule), but
+            # chosen between Newton solves only: within a solve the body is fixed (a union
+            # projection switching body at every iterate makes Newton cycle in the crease),
+            # and two constraints on one node with nearly parallel normals make the bordered
+            # matrix nearly singular
+            worst = np.argmin(gap, axis=1) if self.nb else np.zeros(n, dtype=np.intp)
+            gmin = gap[np.arange(n), worst] if self.nb else np.zeros(n)
+            onehot = np.zeros_like(active)
+            onehot[np.arange(n), worst] = True
+            penetrating = can_touch[:, 0] & (gmin < -self.gap_tol)
+            own = np.where(active, gap, np.inf).min(axis=1) if self.nb else np.zeros(n)
+            move = active.any(axis=1) & penetrating & (gmin < own - self.gap_tol)
+            drop |= active & move[:, None]
+            add = onehot & (penetrating & ~active.any(axis=1) | move)[:, None]
             return drop, add, self.comm.allreduce(int(drop.sum() + add.sum()), op=MPI.SUM)
 
         while True:
