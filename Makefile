@@ -7,7 +7,7 @@ export OMP_NUM_THREADS := 1
 MPIRUN := mpirun --allow-run-as-root --oversubscribe -n 2
 OUT ?= results
 
-.PHONY: env test test-serial test-mpi test-slow lint demo demo-rollup demo-body demo-contact demo-arm verification bench bench-blas bench-stiff clean
+.PHONY: env test test-serial test-mpi test-slow lint demo demo-rollup demo-body demo-contact study ladder extreme bench-arm verification bench bench-blas bench-stiff clean
 
 env: .venv/.clothfem-installed
 
@@ -32,8 +32,9 @@ lint: env
 	.venv/bin/ruff check clothfem tests demos benchmarks
 	.venv/bin/ruff format --check clothfem tests demos benchmarks
 
-## make demo: the main demo
-demo: env demo-rollup
+## make demo: the main demo, the arm-sleeve scene (docs/arm_sleeve.md); writes $(OUT)/arm-sleeve
+demo: env
+	$(PY) demos/arm_sleeve.py --out $(OUT)/arm-sleeve
 
 demo-rollup: env
 	$(PY) demos/rollup_strip.py --out $(OUT)/rollup
@@ -44,9 +45,24 @@ demo-body: env
 demo-contact: env
 	$(PY) demos/contact_push.py --out $(OUT)/contact_push
 
-## make demo-arm: the paper's arm-sleeve scene (today it stops near 4 degrees: docs/arm_sleeve.md)
-demo-arm: env
-	.venv/bin/clothfem run demos/scenes/arm_sleeve.toml --out $(OUT)/arm-sleeve
+## make study: the five studies of Sec. 4.1 (benchmarks/arm_studies.py; hours on the default mesh)
+STUDY_ARGS ?=
+study: env
+	$(PY) benchmarks/arm_studies.py --out $(OUT)/arm-studies $(STUDY_ARGS)
+
+## make ladder: error of the torque-angle curve against run time (benchmarks/arm_ladder.py)
+LADDER_ARGS ?=
+ladder: env
+	$(PY) benchmarks/arm_ladder.py --out $(OUT)/arm-ladder $(LADDER_ARGS)
+
+## make extreme: stiff and extreme arm-sleeve cases (benchmarks/arm_extreme.py)
+EXTREME_ARGS ?=
+extreme: env
+	$(PY) benchmarks/arm_extreme.py --out $(OUT)/arm-extreme $(EXTREME_ARGS)
+
+## make bench-arm: per-step time split and the 2-rank speed-up (benchmarks/arm_perf.py)
+bench-arm: env
+	$(PY) benchmarks/arm_perf.py --out $(OUT)/arm-perf
 
 ## make verification: the README's shell verification table (results/verification.md)
 verification: env

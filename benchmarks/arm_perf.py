@@ -1,0 +1,101 @@
+"""Where the arm-sleeve step time goes, and the 2-rank speed-up (issue 5, item 7).
+
+Runs a short version of the scene (dynamic settling 0.05 s, then `--angle` degrees of
+flexion) serially and under `mpirun -n 2`, on each mesh of `--meshes`, and reads the
+per-row timers the runner writes to `history.csv` (rank 0's share):
+
+* assembly: fabric residual and tangent (UFL forms, the nodal chain rule P^T K P, inertia);
+* contact: projections on the ellipsoids, friction, building the bordered KKT matrix;
+* solve: the MUMPS factorisation and solve of the bordered system;
+* io: XDMF fields and checkpoints; other = wall time - the rest (CSV, PNG, Python glue).
+
+Speed-up = serial wall / 2-rank wall of the same command; since a different partition can
+change Newton's path (iterations, cut-backs), the table also gives the time per Newton
+iteration and its ratio. Writes `OUT/arm_perf.csv` and `OUT/arm_perf.md`.
+
+    .venv/bin/python benchmarks/arm_perf.py --out results/arm-perf [--meshes 8x10 16x20]
+"""
+
+import argparse
+import csv
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from clothfem.report import read_history, read_summary
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENE = ROOT / "demos" / "scenes" / "arm_sleeve.toml"
+PARTS = ("t_assembly", "t_contact", "t_solve", "t_io")
+
+
+def run(out: Path, mesh: str, angle: float, ranks: int) -> dict:
+    na, nl = mesh.split("x")
+    sets = [
+        f"mesh.n_around={na}",
+        f"mesh.n_along={nl}",
+        "solver.settle_time=0.05",
+        "solver.ramp_time=0.05",
+        f"body.1.angle_max={angle}",
+        "output.png=false",
+    ]
+    cmd = [sys.executable, "-m", "clothfem.cli", "run", str(SCENE), "--out", str(out)]
+    cmd += [a for s in sets for a in ("--set", s)]
+    if ranks > 1:
+        mpi = ["mpirun", "--allow-run-as-root", "--oversubscribe", "-n", str(ranks)]
+        cmd = [*mpi, sys.executable, "-m", "mpi4py", *cmd[1:]]
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
+    env["OPENBLAS_NUM_THREADS"] = "1"
+    res = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    h, s = read_history(out / "history.csv"), read_summary(out)
+    wall = float(s.get("wall_time", h["elapsed"][-1]))
+    row = {"mesh": mesh, "ranks": ranks, "exit": res.returncode, "wall_s": wall}
+    row["steps"] = len(h["time"])
+    row["newton"] = int(h["newton_iterations"].sum())
+    row["final_angle"] = float(h["angle_deg"][-1])
+    parts = {p: float(h[p].sum()) for p in PARTS}
+    for p in PARTS:
+        row[p[2:] + "_s"] = parts[p]
+        row[p[2:] + "_pct"] = 100 * parts[p] / wall
+    row["other_pct"] = 100 * (wall - sum(parts.values())) / wall
+    row["ms_per_newton"] = 1000 * wall / max(row["newton"], 1)
+    return row
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="results/arm-perf")
+    ap.add_argument("--meshes", nargs="+", default=["8x10", "16x20"])
+    ap.add_argument("--angle", type=float, default=5.0, help="flexion of the short run [deg]")
+    args = ap.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for mesh in args.meshes:
+        for ranks in (1, 2):
+            r = run(out / f"{mesh}_np{ranks}", mesh, args.angle, ranks)
+            rows.append(r)
+            print({k: round(v, 3) if isinstance(v, float) else v for k, v in r.items()}, flush=True)
+        one, two = rows[-2], rows[-1]
+        two["speedup"] = one["wall_s"] / two["wall_s"]
+        two["speedup_per_newton"] = one["ms_per_newton"] / two["ms_per_newton"]
+    keys = list(dict.fromkeys(k for r in rows for k in r))
+    with open(out / "arm_perf.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows)
+    cols = ["mesh", "ranks", "wall_s", "steps", "newton", "ms_per_newton", "assembly_pct"]
+    cols += ["contact_pct", "solve_pct", "io_pct", "other_pct", "speedup", "speedup_per_newton"]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for r in rows:
+        cells = [r.get(c, "") for c in cols]
+        lines.append(
+            "| " + " | ".join(f"{c:.3g}" if isinstance(c, float) else str(c) for c in cells) + " |"
+        )
+    (out / "arm_perf.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
