@@ -305,6 +305,13 @@ SCHEMA: dict[str, Section] = {
                 default=0.0,
                 lo=0.0,
             ),
+            "tangential_penalty": Key(
+                "float",
+                "k_t [N/m] of the regularised stick law (elastic slip |f_t|/k_t); default "
+                "100 x min(E1, E2) x t, at most 1e6",
+                lo=0.0,
+                open_lo=True,
+            ),
             "torque_segment": Key(
                 "str", "hinge segment whose joint is the Eq. 28 centre J (default: first hinge)"
             ),

@@ -514,7 +514,7 @@ def _run_dynamic(
     dc = DynamicContact(
         ShellSystem(model, rotary_scale=sv["rotary_scale"]),
         bodies_at,
-        params=LagrangeContactParameters(mu=c["mu"]),
+        params=LagrangeContactParameters(mu=c["mu"], tangential_penalty=c["tangential_penalty"]),
         beta=(gamma + 0.5) ** 2 / 4,
         gamma=gamma,
     )

@@ -103,6 +103,12 @@ FloatArray = NDArray[np.float64]
 
 log = logging.getLogger("clothfem.contact.lagrange")
 
+# N/m: cap of the default tangential penalty. Stiffer sticking only shrinks an elastic slip
+# that is already negligible (|f_t| / k_t <= 1e-8 m at 0.01 N), while it makes the return map
+# switch stick/slip on round-off: a 7.2 GPa sleeve with k_t = 100 E t = 7.2e8 N/m stalled
+# Newton at |r| ~ mu lam (measured); with k_t = 1e6 it converged in 4-5 iterations.
+KT_MAX = 1e6
+
 
 class ContactDivergence(RuntimeError):
     """Newton or the active-set iteration failed in a step; the state was restored."""
@@ -114,7 +120,8 @@ class LagrangeContactParameters:
 
     mu: Coulomb friction coefficient (>= 0); 0 builds no friction terms at all.
     tangential_penalty: k_t in N/m (> 0) of the regularised stick law; None means
-        ``100 * max(E1, E2) * t`` (the membrane stiffness scale of a node, times 100).
+        ``min(100 * min(E1, E2) * t, KT_MAX)`` (100 x the membrane stiffness scale of a node,
+        at most 1e6 N/m).
     gap_tolerance: activation threshold in m (> 0): an inactive node is activated when its gap
         is below ``-gap_tolerance``; None means ``1e-4 * thickness``.
     multiplier_tolerance: relative deactivation threshold (in [0, 1)): an active node is
@@ -286,7 +293,7 @@ class LagrangeContact:
         self._friction: _FrictionState | None = None
         if params.mu > 0:
             kt = params.tangential_penalty
-            kt = kt if kt is not None else 100.0 * max(mat.E1, mat.E2) * t
+            kt = kt if kt is not None else min(100.0 * min(mat.E1, mat.E2) * t, KT_MAX)
             self._friction = _FrictionState(n, self.nb, params.mu, kt)
             self._friction.commit(self._positions(), self.bodies, np.zeros((n * self.nb, 3)))
         self._last_friction = np.zeros((n, 3))  # per node [N]
