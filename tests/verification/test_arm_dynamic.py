@@ -125,3 +125,19 @@ def test_resume_after_sigterm_reproduces_the_history(reference, tmp_path):
     for a, b in zip(reference, rows, strict=True):
         for key in ("time", "angle_deg", "torque_x", "torque_y", "torque_z", "n_active"):
             assert float(b[key]) == pytest.approx(float(a[key]), rel=1e-10, abs=1e-14), key
+
+
+def test_main_demo_small(tmp_path):
+    """`make demo`'s script at a small size: the default scene to 2 degrees; it ends by
+    printing the torque at the angle reached, and writes the plot, snapshots and summary."""
+    cmd = [sys.executable, str(ROOT / "demos" / "arm_sleeve.py"), "--out", str(tmp_path)]
+    cmd += ["--set", "body.1.angle_max=2.0", "--set", "solver.settle_time=0.05"]
+    cmd += ["--set", "solver.ramp_time=0.05"]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=900, env=ENV)
+    assert res.returncode == 0, res.stderr[-3000:]
+    last = res.stdout.strip().splitlines()[-1]
+    assert last.startswith("reached 2.0 deg of 2; torque there = ")
+    assert float(last.split("=")[1].split()[0]) > 0
+    for name in ("torque_angle.png", "snapshot_settled.png", "snapshot_final.png"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert '"completed": true' in (tmp_path / "summary.json").read_text()
