@@ -312,6 +312,13 @@ SCHEMA: dict[str, Section] = {
                 lo=0.0,
                 open_lo=True,
             ),
+            "semismooth_passes": Key(
+                "int",
+                "newmark: active-set passes per step that may change the set inside Newton "
+                "(semismooth); later passes converge Newton on a fixed set",
+                default=5,
+                lo=0,
+            ),
             "torque_segment": Key(
                 "str", "hinge segment whose joint is the Eq. 28 centre J (default: first hinge)"
             ),

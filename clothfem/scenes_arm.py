@@ -514,7 +514,11 @@ def _run_dynamic(
     dc = DynamicContact(
         ShellSystem(model, rotary_scale=sv["rotary_scale"]),
         bodies_at,
-        params=LagrangeContactParameters(mu=c["mu"], tangential_penalty=c["tangential_penalty"]),
+        params=LagrangeContactParameters(
+            mu=c["mu"],
+            tangential_penalty=c["tangential_penalty"],
+            semismooth_passes=c["semismooth_passes"],
+        ),
         beta=(gamma + 0.5) ** 2 / 4,
         gamma=gamma,
     )

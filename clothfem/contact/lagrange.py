@@ -696,6 +696,8 @@ class LagrangeContact:
         lam_pairs = np.where(active, self._lam, 0.0).ravel()
         newton_total, sets = 0, 0
         fr = None
+        flips = np.zeros(active.shape, dtype=int)
+        frozen = np.zeros(active.shape, dtype=bool)
 
         def changes_of(xv: PETSc.Vec, pairs, lam_a) -> tuple[NDArray, NDArray, int]:
             """Pairs to release (tensile multiplier) and to add (penetrating), and their
@@ -722,6 +724,9 @@ class LagrangeContact:
             move = active.any(axis=1) & penetrating & (gmin < own - self.gap_tol)
             drop |= active & move[:, None]
             add = onehot & (penetrating & ~active.any(axis=1) | move)[:, None]
+            # pairs that kept flipping in this step stay active (see the loop below)
+            drop &= ~frozen
+            add |= frozen & ~active
             return drop, add, self.comm.allreduce(int(drop.sum() + add.sum()), op=MPI.SUM)
 
         while True:
@@ -753,6 +758,20 @@ class LagrangeContact:
                 )
             active = (active & ~drop) | add
             lam_pairs[drop.ravel()] = 0.0
+            # anti-cycling: a pair switched in or out 6 times in one step is kept active for
+            # the rest of the step; if it then pulls on the body by more than 1 % of the
+            # largest multiplier the step fails (and is cut) instead of accepting adhesion
+            flips += drop | add
+            frozen |= flips >= 6
+        if frozen.any() or self.comm.allreduce(bool(frozen.any()), op=MPI.LOR):
+            lam_max = self.comm.allreduce(float(np.max(np.abs(lam_pairs), initial=0.0)), op=MPI.MAX)
+            pull = float(np.min(lam_pairs.reshape(n, self.nb)[frozen], initial=0.0))
+            if self.comm.allreduce(pull < -1e-2 * lam_max, op=MPI.LOR):
+                self._restore(saved_u, saved_t, saved_active, saved_lam)
+                raise ContactDivergence(
+                    f"active set cycling at load factor {lam_load:.6g}: a pair kept active "
+                    f"pulls with {pull:.3g} N"
+                )
         # commit
         m.set_state(xv)
         x = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
