@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from dolfinx import fem
 from mpi4py import MPI
 
 from .body import FixedMotion, HingeMotion
@@ -553,6 +554,8 @@ def _run_dynamic(
         keep = state["rows"]
         rank0_print(f"  resumed from the checkpoint at t = {dc.t:.6g} s (step {state['step']})")
     xdmf_name = "fabric" if keep is None else f"fabric_resumed_{state['step']:05d}"
+    pressure = fem.Function(contact.S, name="contact_pressure")  # Pa, nodal (lam / area)
+    model.u.name = "displacement"
     timers0 = dict(contact.timers)
     quarters = [angle_end * q / 4 for q in (1, 2, 3)]
 
@@ -567,7 +570,10 @@ def _run_dynamic(
             tio = time.perf_counter()
             step = state["step"]
             if step % o["every"] == 0:
-                writer.write_fields(r.time)
+                st = contact.state()  # collective (lumped areas)
+                pressure.x.array[: contact.n] = st.pressure
+                pressure.x.scatter_forward()
+                writer.write_fields(r.time, (pressure,))
             if o["checkpoint_every"] and step % o["checkpoint_every"] == 0:
                 run = {f"run_{k}": np.array(v) for k, v in state.items()}
                 run["run_rows"] = np.array(state["rows"] + 1)  # this step's row included
