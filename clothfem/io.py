@@ -100,8 +100,11 @@ def _gather_surface(model):
     return np.vstack(pts), np.vstack(cls)
 
 
-def snapshot_png(model, path: str | Path, *, title: str = "", extra_meshes=()) -> None:
-    """Draw the deformed fabric (and optional pyvista meshes, e.g. ellipsoids) to a PNG."""
+def snapshot_png(
+    model, path: str | Path, *, title: str = "", extra_meshes=(), view: str = "iso"
+) -> None:
+    """Draw the deformed fabric (and optional pyvista meshes, e.g. ellipsoids) to a PNG;
+    ``view``: "iso" (isometric) or "xz" (side view along y)."""
     points, cells = _gather_surface(model)
     if model.comm.rank != 0:
         return
@@ -118,7 +121,12 @@ def snapshot_png(model, path: str | Path, *, title: str = "", extra_meshes=()) -
         plotter.add_mesh(m, color="#e0b090", opacity=0.5)
     if title:
         plotter.add_text(title, font_size=12)
-    plotter.view_isometric()
+    if view == "xz":
+        plotter.view_xz()
+        plotter.camera.elevation = 15.0
+        plotter.camera.azimuth = 20.0
+    else:
+        plotter.view_isometric()
     plotter.screenshot(str(path))
     plotter.close()
 

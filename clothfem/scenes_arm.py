@@ -335,7 +335,11 @@ def run_contact_scene(
         if png:
             meshes = _ellipsoid_meshes(contact) if comm.rank == 0 else ()
             snapshot_png(
-                model, out / f"snapshot_{tag}.png", title=f"{name} {tag}", extra_meshes=meshes
+                model,
+                out / f"snapshot_{tag}.png",
+                title=f"{name} {tag}",
+                extra_meshes=meshes,
+                view="xz",
             )
 
     increments = c["increments"]
@@ -541,7 +545,11 @@ def _run_dynamic(
         if o["png"]:
             meshes = _ellipsoid_meshes(contact) if comm.rank == 0 else ()
             snapshot_png(
-                model, out / f"snapshot_{tag}.png", title=f"{name} {tag}", extra_meshes=meshes
+                model,
+                out / f"snapshot_{tag}.png",
+                title=f"{name} {tag}",
+                extra_meshes=meshes,
+                view="xz",
             )
 
     state = {"step": 0, "rows": 0, "cut": 0, "pen": 0.0, "newton": 0, "snap": 0}
