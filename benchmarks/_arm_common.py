@@ -257,12 +257,28 @@ def run_cases(
             print(f"[{study_dir.name}/{case.name}] completed before: skipped (--force reruns)")
         else:
             folder.mkdir(parents=True, exist_ok=True)
-            for stale in ("summary.json", "history.csv", "case.json"):
-                (folder / stale).unlink(missing_ok=True)
+            # a case stopped by --timeout continues from its checkpoint (same overrides)
+            before = _load_json(folder / "case.json") or {}
+            resume = (
+                not args.force
+                and before.get("timed_out")
+                and before.get("sets") == sets
+                and (folder / "checkpoint").is_dir()
+            )
+            if resume:
+                cmd = [*cmd, "--resume"]
+            else:
+                for stale in ("summary.json", "history.csv", "case.json"):
+                    (folder / stale).unlink(missing_ok=True)
             (folder / "command.txt").write_text(shlex.join(cmd) + "\n")
-            print(f"[{study_dir.name}/{case.name}] running ...", flush=True)
+            print(
+                f"[{study_dir.name}/{case.name}] {'resuming' if resume else 'running'} ...",
+                flush=True,
+            )
             code, wall, timed_out = _run(cmd, folder, args.timeout)
+            wall += float(before.get("wall_s", 0.0)) if resume else 0.0
             rec = {"sets": sets, "returncode": code, "wall_s": wall, "timed_out": timed_out}
+            rec["resumed"] = bool(resume)
             if timed_out:
                 rec["timeout_s"] = args.timeout
             (folder / "case.json").write_text(json.dumps(rec, indent=1) + "\n")
@@ -375,7 +391,9 @@ def case_result(folder: Path, angles: Sequence[float] = REPORT_ANGLES) -> dict[s
         "max_penetration_m": pick(
             "max_penetration", float(np.nanmax(pen)) if pen.size else math.nan
         ),
-        "wall_s": pick(
+        "wall_s": float(rec["wall_s"])  # a resumed case: both runs, from the driver
+        if rec.get("resumed")
+        else pick(
             "wall_time",
             float(elapsed[-1]) if elapsed.size else float(rec.get("wall_s", math.nan)),
         ),
