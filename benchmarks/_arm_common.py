@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from clothfem.report import curve_error, read_history
+from clothfem.report import torque_curve as report_torque_curve
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "demos" / "scenes" / "arm_sleeve.toml"
@@ -322,19 +323,14 @@ def _nan_in_csv(path: Path) -> bool:
 
 
 def torque_curve(hist: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """(angle in deg, |tau| in N m) of a history: the last settling row (the settled state
-    at 0 deg) and the motion rows, sorted by angle; the angle must increase along the
-    motion (repeated angles keep their last row)."""
+    """:func:`clothfem.report.torque_curve` (the settled row and the motion rows), finite
+    values only, sorted by angle (repeated angles keep their last row); empty if the
+    history lacks the columns."""
     if not hist or "angle_deg" not in hist or "torque_mag" not in hist:
         return np.zeros(0), np.zeros(0)
-    stage = np.asarray(hist.get("stage", np.full(len(hist["angle_deg"]), "motion"))).astype(str)
-    angle = np.asarray(hist["angle_deg"], dtype=float)
-    torque = np.asarray(hist["torque_mag"], dtype=float)
-    keep = stage == "motion"
-    settle = np.flatnonzero(stage == "settle")
-    if settle.size:
-        keep[settle[-1]] = True
-    a, t = angle[keep], torque[keep]
+    if "stage" not in hist:
+        hist = {**hist, "stage": np.full(len(hist["angle_deg"]), "motion")}
+    a, t = report_torque_curve(hist)
     ok = np.isfinite(a) & np.isfinite(t)
     a, t = a[ok], t[ok]
     order = np.argsort(a, kind="stable")

@@ -229,6 +229,20 @@ class _ViscousStabilization:
         return comm.allreduce(float(f), op=MPI.SUM)
 
 
+def _torque_columns(tau: np.ndarray, res: np.ndarray, hinge_axis: np.ndarray) -> dict:
+    """CSV columns of the Eq. 28 torque [N m] and the resultant on the body [N]."""
+    return {
+        "torque_x": tau[0],
+        "torque_y": tau[1],
+        "torque_z": tau[2],
+        "torque_mag": float(np.linalg.norm(tau)),
+        "torque_flex": float(tau @ hinge_axis),
+        "resultant_x": res[0],
+        "resultant_y": res[1],
+        "resultant_z": res[2],
+    }
+
+
 def _ellipsoid_meshes(contact: LagrangeContact):
     import pyvista as pv
 
@@ -367,14 +381,7 @@ def run_contact_scene(
                 "time": t,
                 "load_factor": float(model.lam.value),
                 "angle_deg": angle,
-                "torque_x": tau[0],
-                "torque_y": tau[1],
-                "torque_z": tau[2],
-                "torque_mag": float(np.linalg.norm(tau)),
-                "torque_flex": float(tau @ hinge_axis),
-                "resultant_x": res[0],
-                "resultant_y": res[1],
-                "resultant_z": res[2],
+                **_torque_columns(tau, res, hinge_axis),
                 "n_active": last.n_active,
                 "max_penetration": max(r.max_penetration for r in recs),
                 "min_multiplier": min(r.min_multiplier for r in recs),
@@ -600,14 +607,7 @@ def _run_dynamic(
                 "dt": r.dt,
                 "load_factor": float(model.lam.value),
                 "angle_deg": angle,
-                "torque_x": tau[0],
-                "torque_y": tau[1],
-                "torque_z": tau[2],
-                "torque_mag": float(np.linalg.norm(tau)),
-                "torque_flex": float(tau @ hinge_axis),
-                "resultant_x": res[0],
-                "resultant_y": res[1],
-                "resultant_z": res[2],
+                **_torque_columns(tau, res, hinge_axis),
                 "n_active": cr.n_active,
                 "max_penetration": cr.max_penetration,
                 "min_multiplier": cr.min_multiplier,

@@ -902,17 +902,26 @@ class LagrangeContact:
             x, gap, self.active, lam, normal, self._last_friction.copy(), f, -f, area, lam / area
         )
 
+    def _forces_on_body(self) -> FloatArray:
+        """Contact force on the body per owned node [N] (sum over its pairs), (n, 3)."""
+        nodes, _, f_pairs, _ = self.pair_forces()
+        f = np.zeros((self.n, 3))
+        np.add.at(f, nodes, -f_pairs)
+        return f
+
     def resultant(self) -> FloatArray:
         """Resultant contact force on the body in N (sum over all ranks), (3,)."""
-        s = self.state()
-        return self.comm.allreduce(s.force_on_body.sum(axis=0), op=MPI.SUM)
+        return self.comm.allreduce(self._forces_on_body().sum(axis=0), op=MPI.SUM)
 
     def torque(self, joint: ArrayLike, *, nodes: Callable[[np.ndarray], np.ndarray] | None = None):
         """Eq. 28 torque (N m) the fabric exerts on the body about ``joint``, over the nodes
         selected by ``nodes(X)`` (reference coordinates, shape (3, N); all nodes if None)."""
-        s = self.state()
         sel = None if nodes is None else np.asarray(nodes(self.X.T.copy()), dtype=bool)
-        tau = joint_torque(s.x, s.force_on_body, joint, nodes=sel) if self.n else np.zeros(3)
+        tau = (
+            joint_torque(self._positions(), self._forces_on_body(), joint, nodes=sel)
+            if self.n
+            else np.zeros(3)
+        )
         return self.comm.allreduce(tau, op=MPI.SUM)
 
     def reactions(self) -> tuple[NDArray[np.int32], FloatArray]:
@@ -925,11 +934,7 @@ class LagrangeContact:
         f = xv.duplicate()
         m.residual(xv, f)
         r = f.getArray(readonly=True).copy()
-        if self.n:
-            nodes, _, f_pairs, _ = self.pair_forces()
-            fc = np.zeros((self.n, 3))
-            np.add.at(fc, nodes, f_pairs)
-            r[: 3 * self.n] -= fc.ravel()
+        r[: 3 * self.n] += self._forces_on_body().ravel()  # minus the force on the fabric
         return rows, r[rows]
 
 
