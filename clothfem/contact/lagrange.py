@@ -75,7 +75,6 @@ from dataclasses import dataclass
 
 import dolfinx.fem.petsc as fem_petsc
 import numpy as np
-import scipy.sparse as sp
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
@@ -90,6 +89,7 @@ from .geometry import (
     _check_bodies,
     closest_point_ellipsoid,
 )
+from .kkt import BorderedMatrix
 
 __all__ = [
     "ContactDivergence",
@@ -286,6 +286,8 @@ class LagrangeContact:
         # ellipsoid, and each ellipsoid's gap is smooth (a union projection switches body
         # in the concave crease between two ellipsoids, and Newton cycles there)
         self.nb = len(self.bodies)
+        self._pose_version = 0  # bumped by set_pose (cache key of _gaps)
+        self._gap_cache: tuple[int, FloatArray, FloatArray] | None = None
         self._act = np.zeros((n, self.nb), dtype=bool)
         self._lam = np.zeros((n, self.nb))
         self.step_count = 0
@@ -301,6 +303,7 @@ class LagrangeContact:
         self._build_solver()
         self._build_area_forms()
         self._K: PETSc.Mat | None = None
+        self._kkt: BorderedMatrix | None = None
         # cumulative wall time [s] by part: fabric residual/tangent assembly, the contact layer
         # (projections, friction, bordered matrix), the linear solve
         self.timers = {"assembly": 0.0, "contact": 0.0, "solve": 0.0}
@@ -337,7 +340,7 @@ class LagrangeContact:
             self.set_pose(k, centre=b[:3], axes=b[3:12].reshape(3, 3), radii=b[12:])
         if self._friction is not None:
             f = self._friction
-            f.xi[:], f.force_old[:] = data["fr_xi"], data["fr_force"]
+            f.set_history(data["fr_xi"], data["fr_force"])
 
     @property
     def active(self) -> NDArray[np.bool_]:
@@ -363,11 +366,18 @@ class LagrangeContact:
         return nodes, body, gap, nrm, point
 
     def _gaps(self, x: FloatArray) -> FloatArray:
-        """Signed gap of every owned node to every ellipsoid, (n, nb) [m]."""
+        """Signed gap of every owned node to every ellipsoid, (n, nb) [m] (read-only; the
+        last result is reused while the positions and poses stay the same: the active-set
+        test and the commit ask at the point Newton has just evaluated)."""
+        hit = self._gap_cache
+        if hit is not None and hit[0] == self._pose_version and np.array_equal(hit[1], x):
+            return hit[2]
         out = np.zeros((len(x), self.nb))
         for k, (c, Q, r) in enumerate(self.bodies):
             if len(x):
                 out[:, k] = closest_point_ellipsoid(x, c, Q, r).gap
+        out.flags.writeable = False
+        self._gap_cache = (self._pose_version, x.copy(), out)
         return out
 
     def pair_forces(self):
@@ -403,6 +413,7 @@ class LagrangeContact:
         )
         c2, Q2, r2 = _check_bodies([new])[0]
         c[:], Q[:], r[:] = c2, Q2, r2
+        self._pose_version += 1
 
     # ------------------------------------------------------------------ setup
     def _build_solver(self) -> None:
@@ -462,63 +473,14 @@ class LagrangeContact:
         return diag * (total / sdiag)
 
     # ------------------------------------------------------------------ algebra
-    def _bordered(
-        self,
-        K: PETSc.Mat,
-        nodes: NDArray[np.intp],
-        col: FloatArray,
-        row: FloatArray,
-        kt_blocks: FloatArray | None,
-        bc_rows: NDArray[np.int32],
-    ) -> PETSc.Mat:
-        """[[K + Kt, C], [B, 0]] as one AIJ matrix: C (3 per active node) the multiplier
-        column, B the constraint row, both on the node's u dofs; bc rows set to identity."""
-        comm = self.comm
-        n5 = 5 * self.n
-        m = len(nodes)
-        ms = np.array(comm.allgather(m))
-        moff = np.concatenate([[0], np.cumsum(ms)])
-        kr = np.array(K.getOwnershipRanges())
-        ntot = int(kr[-1] + moff[-1])
-        r0 = int(kr[comm.rank] + moff[comm.rank])  # first global row of this rank
-        indptr, indices, data = K.getValuesCSR()
-        owner = np.searchsorted(kr, indices, side="right") - 1
-        new_cols = indices + moff[owner]
-        A = sp.csr_matrix((data, new_cols, indptr), shape=(n5, ntot))
-        lam_cols = r0 + n5 + np.arange(m)
-        urows = (3 * nodes[:, None] + np.arange(3)).ravel()
-        blocks = [
-            A,
-            sp.csr_matrix((col.ravel(), (urows, np.repeat(lam_cols, 3))), shape=(n5, ntot)),
-        ]
-        if kt_blocks is not None and m:
-            rr = np.repeat(urows.reshape(m, 3), 3, axis=1).ravel()
-            cc = np.tile(urows.reshape(m, 3), (1, 3)).ravel() + r0
-            blocks.append(sp.csr_matrix((kt_blocks.ravel(), (rr, cc)), shape=(n5, ntot)))
-        top = sum(blocks[1:], blocks[0]).tocsr()
-        if len(bc_rows):
-            keep = np.ones(n5)
-            keep[bc_rows] = 0.0
-            top = sp.diags(keep) @ top
-            eye = sp.csr_matrix((np.ones(len(bc_rows)), (bc_rows, bc_rows + r0)), shape=(n5, ntot))
-            top = (top + eye).tocsr()
-        bot = sp.csr_matrix(
-            (row.ravel(), (np.repeat(np.arange(m), 3), urows + r0)), shape=(m, ntot)
-        )
-        full = sp.vstack([top, bot]).tocsr()
-        full.sum_duplicates()
-        full.sort_indices()
-        B = PETSc.Mat().createAIJ(
-            size=((n5 + m, ntot), (n5 + m, ntot)),
-            csr=(
-                full.indptr.astype(PETSc.IntType),
-                full.indices.astype(PETSc.IntType),
-                full.data,
-            ),
-            comm=comm,
-        )
-        B.assemble()
-        return B
+    def _kkt_matrix(self, nodes: NDArray[np.intp], bc_rows: NDArray[np.int32]) -> BorderedMatrix:
+        """The bordered matrix of the pairs on ``nodes``: kept while the active set and the
+        supports stay the same (the LU reuses its symbolic analysis), rebuilt otherwise."""
+        if self._kkt is None or not self._kkt.matches(nodes, bc_rows):
+            if self._kkt is not None:
+                self._kkt.destroy()
+            self._kkt = BorderedMatrix(self._K, nodes, bc_rows)
+        return self._kkt
 
     def _contact_terms(self, x: FloatArray, pairs: NDArray[np.intp], lam: FloatArray):
         """Gap, normal and friction terms of the active (node, ellipsoid) pairs at ``x``."""
@@ -530,7 +492,9 @@ class LagrangeContact:
         blocks = -lam[:, None, None] * _weingarten(point, nrm, gap, body, self.bodies)
         fr = None
         if self._friction is not None:
-            fr = self._friction.evaluate(point, pairs, nrm, body, lam, self.bodies)
+            fr = self._friction.evaluate(
+                point, pairs, nrm, body, lam, self.bodies, self._pose_version
+            )
             force = force + fr.force
             col = col - fr.dforce_dlam
             blocks = blocks + fr.tangent
@@ -607,7 +571,7 @@ class LagrangeContact:
             t0 = time.perf_counter()
             self._K = m.jacobian(xv, self._K)
             t1 = time.perf_counter()
-            B = self._bordered(self._K, nodes // self.nb, col, -nrm, kt_blocks, bc_rows)
+            B = self._kkt_matrix(nodes // self.nb, bc_rows).update(self._K, col, -nrm, kt_blocks)
             t2 = time.perf_counter()
             self.timers["assembly"] += t1 - t0
             self.timers["contact"] += t2 - t1
@@ -624,7 +588,6 @@ class LagrangeContact:
             self.timers["solve"] += time.perf_counter() - t2
             ok_solve = self.ksp.getConvergedReason() > 0
             s = sol.getArray(readonly=True).copy()
-            B.destroy()
             rhs.destroy()
             sol.destroy()
             ok_solve = ok_solve and bool(np.all(np.isfinite(s)))
@@ -978,6 +941,8 @@ class _FrictionState:
         self.mu, self.kt, self.nb = mu, kt, nb
         self.xi = np.zeros((n * nb, 3))  # body-local coordinates of the last contact point
         self.force_old = np.zeros((n * nb, 3))
+        # anchors depend on the pairs, the poses and xi only: fixed within a step's Newton
+        self._anchors: tuple[tuple[int, bytes], FloatArray] | None = None
 
     def commit(self, x: FloatArray, bodies, force: FloatArray) -> None:
         """Anchor every pair at the closest point of its ellipsoid; ``force`` (n * nb, 3)."""
@@ -987,18 +952,34 @@ class _FrictionState:
         for k, (c, Q, r) in enumerate(bodies):
             xi[:, k] = (closest_point_ellipsoid(x, c, Q, r).point - c) @ Q
         self.force_old[:] = force
+        self._anchors = None
 
-    def evaluate(self, point, pairs, nrm, body, lam, bodies) -> _FrictionEval:
-        m = len(pairs)
-        P = np.eye(3)[None] - nrm[:, :, None] * nrm[:, None, :]
-        anchor = np.empty((m, 3))
+    def set_history(self, xi: FloatArray, force_old: FloatArray) -> None:
+        """Restore the history (checkpoint)."""
+        self.xi[:], self.force_old[:] = xi, force_old
+        self._anchors = None
+
+    def anchors(self, pairs, body, bodies, pose_version: int) -> FloatArray:
+        """The body material point each pair touched at the last converged step, carried
+        with the body and put back on its (possibly resized) surface (m, 3) [m]; reused
+        while the pairs, the poses (``pose_version``) and the history stay the same."""
+        key = (pose_version, pairs.tobytes())
+        if self._anchors is not None and self._anchors[0] == key:
+            return self._anchors[1]
+        anchor = np.empty((len(pairs), 3))
         for k, (c, Q, r) in enumerate(bodies):
             sel = np.flatnonzero(body == k)
             if sel.size:
-                # the body material point touched at the last converged step, carried with
-                # the body and put back on its (possibly resized) surface
                 moved = c + self.xi[pairs[sel]] @ Q.T
                 anchor[sel] = closest_point_ellipsoid(moved, c, Q, r).point
+        anchor.flags.writeable = False
+        self._anchors = (key, anchor)
+        return anchor
+
+    def evaluate(self, point, pairs, nrm, body, lam, bodies, pose_version: int) -> _FrictionEval:
+        m = len(pairs)
+        P = np.eye(3)[None] - nrm[:, :, None] * nrm[:, None, :]
+        anchor = self.anchors(pairs, body, bodies, pose_version)
         du = np.einsum("nij,nj->ni", P, point - anchor)
         f_old = self.force_old[pairs]
         trial = np.einsum("nij,nj->ni", P, f_old) - self.kt * du
