@@ -43,12 +43,16 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "demos" / "scenes" / "arm_sleeve.toml"
 HINGE = "body.1"  # the forearm segment of arm_sleeve.toml ([[body]] index 1)
 REPORT_ANGLES = (10, 20, 30, 40, 50, 57)  # deg: torque columns of the study tables
+# deg: window of the centred moving average of the smoothed curve errors (curve_error
+# window=...); it filters the step-to-step dynamic oscillation of the torque (a few deg)
+SMOOTH_DEG = 2.0
 
 __all__ = [
     "HINGE",
     "ROOT",
     "SCENE",
     "REPORT_ANGLES",
+    "SMOOTH_DEG",
     "Case",
     "RowWriter",
     "add_common_args",

@@ -14,7 +14,9 @@ Studies (``--study``, default all):
   at mu = 0.1 and 0.5 -> ``mesh_mu0.1.png``, ``mesh_mu0.5.png``; ``err_vs_finest`` = relative
   L2 error (``clothfem.report.curve_error``) of |tau|(angle) against the finest mesh of the
   same mu over [lo, A], A = the smallest final angle of the two runs, lo = min(2, A/2) deg
-  (both in the CSV);
+  (both in the CSV); ``err_smooth_vs_finest`` = the same norm of the curves' centred
+  moving averages over SMOOTH_DEG = 2 deg (``curve_error(..., window=SMOOTH_DEG)``, see
+  ``arm_ladder.py``): the error of the trend, without the step-to-step dynamic oscillation;
 * ``friction``: mu = 0.1 vs 0.5 -> ``friction.png`` (the paper's Fig. 8);
 * ``fit``: sleeve radius 0.06 vs 0.07 m at mu = 0.5 -> ``fit.png``;
 * ``thickness``: t = 1 vs 2 mm at mu = 0.5 -> ``thickness.png``; ``ratio_at_<a>deg`` =
@@ -60,6 +62,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _arm_common import (  # noqa: E402
+    SMOOTH_DEG,
     Case,
     RowWriter,
     add_common_args,
@@ -147,7 +150,7 @@ PARAMS = {
     "material": ["n_around", "n_along", "set", "E_Pa", "G12_Pa", "rho", "mu"],
 }
 EXTRA = {
-    "mesh": ["err_vs_finest", "err_lo_deg", "err_hi_deg", "finest"],
+    "mesh": ["err_vs_finest", "err_smooth_vs_finest", "err_lo_deg", "err_hi_deg", "finest"],
     "thickness": [f"ratio_at_{a}deg" for a in RATIO_ANGLES],
     "material": [f"torque_per_E_at_{a}deg" for a in (*RATIO_ANGLES, 57)],
 }
@@ -160,17 +163,20 @@ def _curve(folder: Path):
         return None
 
 
-def compare(ref: Path, run: Path) -> tuple[float, float, float]:
-    """(error, lo, hi): curve_error of run against ref over [min(2, A/2), A], A = the
-    smallest final angle of the two; nan if a curve is missing or A <= 0."""
+def compare(ref: Path, run: Path) -> tuple[float, float, float, float]:
+    """(error, smoothed error, lo, hi): curve_error of run against ref over [min(2, A/2), A],
+    A = the smallest final angle of the two, raw and with window=SMOOTH_DEG; nan if a curve
+    is missing or A <= 0."""
     c_ref, c_run = _curve(ref), _curve(run)
     if c_ref is None or c_run is None or not c_ref[0].size or not c_run[0].size:
-        return math.nan, math.nan, math.nan
+        return math.nan, math.nan, math.nan, math.nan
     hi = min(c_ref[0][-1], c_run[0][-1])
     lo = min(2.0, 0.5 * hi)
     if not hi > lo:
-        return math.nan, lo, hi
-    return curve_error(*c_ref, *c_run, lo=lo, hi=hi), lo, hi
+        return math.nan, math.nan, lo, hi
+    err = curve_error(*c_ref, *c_run, lo=lo, hi=hi)
+    smooth = curve_error(*c_ref, *c_run, lo=lo, hi=hi, window=SMOOTH_DEG)
+    return err, smooth, lo, hi
 
 
 def post_process(study: str, rows: list[dict], study_dir: Path) -> None:
@@ -183,8 +189,9 @@ def post_process(study: str, rows: list[dict], study_dir: Path) -> None:
                 continue
             finest = max(mine, key=lambda r: r["n_around"] * r["n_along"])
             for r in mine:
-                err, lo, hi = compare(study_dir / finest["case"], study_dir / r["case"])
-                r.update(err_vs_finest=err, err_lo_deg=lo, err_hi_deg=hi, finest=finest["case"])
+                err, smooth, lo, hi = compare(study_dir / finest["case"], study_dir / r["case"])
+                r.update(err_vs_finest=err, err_smooth_vs_finest=smooth, err_lo_deg=lo)
+                r.update(err_hi_deg=hi, finest=finest["case"])
     elif study == "thickness":
         base = by_name.get("t1mm")
         for r in rows:

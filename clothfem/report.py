@@ -100,6 +100,67 @@ def torque_at(angles: np.ndarray, torque: np.ndarray, at: float) -> float | None
     return float(np.interp(at, a, t))
 
 
+def _check_window(window: float) -> float:
+    """``window`` as a float; ValueError unless it is a finite number >= 0."""
+    try:
+        w = float(window)
+    except (TypeError, ValueError):
+        w = math.nan
+    if not (math.isfinite(w) and w >= 0.0):
+        raise ValueError(
+            f"window must be a finite number of degrees >= 0 (0 = no smoothing), got {window!r}"
+        )
+    return w
+
+
+def moving_average(
+    angle: np.ndarray, torque: np.ndarray, window: float, *, at: np.ndarray | None = None
+) -> np.ndarray:
+    """Centred moving average of a torque-angle curve over ``window`` degrees.
+
+    The curve is the piecewise-linear interpolant of the finite (angle, torque) pairs,
+    sorted by angle, on its own range [a0, a1]. Its moving average at an angle a is the
+    exact mean of that interpolant over [a - window/2, a + window/2] intersected with
+    [a0, a1]: with F the cumulative trapezoid integral of the curve (exact for a
+    piecewise-linear function),
+
+        S(a) = (F(r) - F(l)) / (r - l),   l = max(a - window/2, a0), r = min(a + window/2, a1).
+
+    Near the ends the window is truncated (one-sided mean), so a linear function is
+    reproduced exactly only where |a - a0| and |a - a1| are >= window/2. Returns S at the
+    angles ``at`` (default: ``angle`` itself, in the given order), as a float array: nan
+    where the window misses [a0, a1] or the angle is not finite; where it only touches it
+    (or the curve is a single point) the curve's end value. ``window = 0`` returns the
+    torque values at ``angle`` unchanged (or, with ``at``, the curve linearly interpolated,
+    clamped at the ends). Raises ValueError if ``window`` is negative or not finite.
+    """
+    w = _check_window(window)
+    a, t = _sorted(angle, torque)
+    x = np.asarray(angle if at is None else at, float)
+    if w == 0.0:
+        if at is None:
+            return np.array(torque, dtype=float)
+        return np.interp(x, a, t) if a.size else np.full(x.shape, math.nan)
+    out = np.full(x.shape, math.nan)
+    if a.size == 0:
+        return out
+    F = np.concatenate(([0.0], np.cumsum(0.5 * np.diff(a) * (t[1:] + t[:-1]))))
+
+    def integral(y: np.ndarray) -> np.ndarray:  # F(y), exact: trapezoid from the node below y
+        k = np.clip(np.searchsorted(a, y, side="right") - 1, 0, a.size - 1)
+        return F[k] + 0.5 * (y - a[k]) * (t[k] + np.interp(y, a, t))
+
+    with np.errstate(invalid="ignore"):
+        left = np.maximum(x - 0.5 * w, a[0])
+        right = np.minimum(x + 0.5 * w, a[-1])
+        width = right - left
+        inside = width > 0
+        touch = width == 0
+    out[inside] = (integral(right[inside]) - integral(left[inside])) / width[inside]
+    out[touch] = np.interp(left[touch], a, t)
+    return out
+
+
 def curve_error(
     ref_angle: np.ndarray,
     ref_torque: np.ndarray,
@@ -108,23 +169,34 @@ def curve_error(
     *,
     lo: float,
     hi: float,
+    window: float = 0.0,
 ) -> float:
     """Relative L2 error of a torque-angle curve against a reference over [lo, hi] deg.
 
-    sqrt(int (tau - tau_ref)^2 da / int tau_ref^2 da), both curves linearly interpolated on
-    200 uniform angles in [lo, hi] and integrated with the trapezoidal rule. Dimensionless;
-    nan if either curve does not cover [lo, hi] (or if both integrals are 0), inf if the
-    reference is identically 0 but the curve is not.
+    With S_w[tau] the centred ``window``-degree moving average of :func:`moving_average`
+    (each curve averaged over its own angle range, so values just outside [lo, hi] enter
+    the averages near lo and hi; S_0[tau] = tau, the default):
+
+        e_w = sqrt(int_lo^hi (S_w[tau] - S_w[tau_ref])^2 da / int_lo^hi S_w[tau_ref]^2 da),
+
+    both curves taken as their piecewise-linear interpolants, S_w evaluated exactly at 200
+    uniform angles in [lo, hi] (``window = 0``: the curves interpolated there) and both
+    integrals by the trapezoidal rule on those angles. ``window > 0`` filters step-to-step
+    oscillation of period <= ``window`` (a full period averages to 0) and compares the
+    trends. Dimensionless; nan if either curve does not cover [lo, hi] (or if both integrals
+    are 0), inf if the (averaged) reference is identically 0 but the curve is not. Raises
+    ValueError if lo >= hi or ``window`` is negative or not finite.
     """
     if not hi > lo:
         raise ValueError(f"curve_error: need lo < hi, got lo={lo}, hi={hi}")
+    w = _check_window(window)
     grid = np.linspace(lo, hi, 200)
     curves = []
     for a, t in ((ref_angle, ref_torque), (angle, torque)):
         a, t = _sorted(a, t)
         if a.size == 0 or a[0] > lo + _ATOL or a[-1] < hi - _ATOL:
             return math.nan
-        curves.append(np.interp(grid, a, t))
+        curves.append(np.interp(grid, a, t) if w == 0.0 else moving_average(a, t, w, at=grid))
 
     def trap(f: np.ndarray) -> float:  # uniform spacing cancels in the ratio
         return float(f.sum() - 0.5 * (f[0] + f[-1]))

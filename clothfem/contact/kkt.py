@@ -12,16 +12,18 @@ per pair on the node's three u rows, B one row per pair on the same columns, K_t
 per pair (curvature of the constraint and friction) and Dirichlet rows replaced by identity
 rows. The multiplier rows of rank r follow its fabric rows in the global numbering.
 
-:class:`BorderedMatrix` builds the sparsity pattern once per active set and refreshes the
-values in place at every Newton iteration: the same PETSc matrix object is kept, so the
-direct solver reuses its symbolic analysis (ordering) and only refactors numerically.
-:func:`bordered_dense` is its dense NumPy twin (serial, tests).
+:class:`BorderedMatrix` builds the sparsity pattern for a set of multiplier *slots* (pairs)
+and refreshes the values in place at every Newton iteration: the same PETSc matrix object
+is kept, so the direct solver reuses its symbolic analysis (ordering) and only refactors
+numerically. A slot whose pair is not active has the identity row ``dlam = 0`` and no
+coupling, so one pattern serves every active set inside its slots (the active set changes
+between Newton passes; rebuilding the pattern each time cost more than the factorisation
+it saved). :func:`bordered_dense` is its dense NumPy twin (one process, tests).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from mpi4py import MPI
 from numpy.typing import NDArray
 from petsc4py import PETSc
 
@@ -35,9 +37,9 @@ def _u_rows(nodes: NDArray[np.intp]) -> NDArray[np.intp]:
 
 
 class BorderedMatrix:
-    """[[K + K_t, C], [B, 0]] as one PETSc AIJ matrix whose pattern is fixed for the pairs on
-    ``nodes`` (owned node index per pair, repeated nodes allowed) and the Dirichlet rows
-    ``bc_rows`` (owned rows of the fabric block).
+    """[[K + K_t, C], [B, D]] as one PETSc AIJ matrix whose pattern is fixed for the slots
+    on ``nodes`` (owned node index per slot, repeated nodes allowed) and the Dirichlet rows
+    ``bc_rows`` (owned rows of the fabric block); D is 0 on active slots, 1 on the others.
 
     Collective on ``K``'s communicator. ``K`` must keep its nonzero pattern between calls
     (the pattern is taken from the first ``K`` and checked at every :meth:`update`).
@@ -75,7 +77,7 @@ class BorderedMatrix:
         self._keep_c = ~is_bc[urows]
         c_rows = urows[self._keep_c]
         extra = np.bincount(c_rows, minlength=n5)  # multiplier entries per fabric row
-        indptr = np.concatenate([[0], np.cumsum(np.concatenate([counts + extra, np.full(m, 3)]))])
+        indptr = np.concatenate([[0], np.cumsum(np.concatenate([counts + extra, np.full(m, 4)]))])
         within = np.arange(len(k_cols)) - fptr[k_rows]
         self._pos_k = indptr[k_rows] + within + np.where(later, extra[k_rows], 0)
         # multiplier entries of a row: right after its last own-rank entry, in pair order
@@ -85,6 +87,7 @@ class BorderedMatrix:
         rank_in_row[order] = np.arange(len(c_rows)) - np.searchsorted(c_rows[order], c_rows[order])
         self._pos_c = indptr[c_rows] + (counts - n_later)[c_rows] + rank_in_row
         self._pos_b = indptr[n5 + np.repeat(np.arange(m), 3)] + np.tile(np.arange(3), m)
+        self._pos_d = indptr[n5 : n5 + m] + 3  # the slot's own column comes after its u columns
         # K_t blocks and the Dirichlet identity land on K's own entries (sorted keys)
         stride = np.int64(kr[-1] + 1)
         keys = k_rows.astype(np.int64) * stride + k_cols
@@ -105,6 +108,7 @@ class BorderedMatrix:
         indices[self._pos_k] = k_cols + moff[owner]
         indices[self._pos_c] = r0 + n5 + np.repeat(np.arange(m), 3)[self._keep_c]
         indices[self._pos_b] = r0 + urows
+        indices[self._pos_d] = r0 + n5 + np.arange(m)
         self._indptr = indptr.astype(PETSc.IntType)
         self._indices = indices.astype(PETSc.IntType)
         nrows = n5 + m
@@ -121,28 +125,33 @@ class BorderedMatrix:
         A.assemble()
         self.mat = A
 
-    def matches(self, nodes: NDArray[np.intp], bc_rows: NDArray[np.int32]) -> bool:
-        """True if this pattern serves the pairs on ``nodes`` and the rows ``bc_rows`` on every
-        rank (collective)."""
-        same = np.array_equal(self.nodes, nodes) and np.array_equal(self.bc_rows, bc_rows)
-        return bool(self.comm.allreduce(same, op=MPI.LAND))
-
     def update(
-        self, K: PETSc.Mat, col: FloatArray, row: FloatArray, blocks: FloatArray
+        self,
+        K: PETSc.Mat,
+        col: FloatArray,
+        row: FloatArray,
+        blocks: FloatArray,
+        active: NDArray[np.bool_] | None = None,
     ) -> PETSc.Mat:
         """Write the values at the current iterate into :attr:`mat` and return it: ``col``
         (m, 3) the multiplier columns, ``row`` (m, 3) the constraint rows, ``blocks``
-        (m, 3, 3) the K_t blocks, all per pair in the order of ``nodes``."""
+        (m, 3, 3) the K_t blocks, per slot in the order of ``nodes``; ``active`` (m,) marks
+        the slots in use (default all), the others get the row ``dlam = 0``."""
         indptr, indices, kdata = K.getValuesCSR()
         same = np.array_equal(indptr, self._k_indptr) and np.array_equal(indices, self._k_indices)
         if not same:
             raise RuntimeError("the fabric tangent changed its sparsity pattern")
+        on = np.ones(len(self.nodes), dtype=bool) if active is None else np.asarray(active)
+        col = np.where(on[:, None], col, 0.0)
+        row = np.where(on[:, None], row, 0.0)
+        blocks = np.where(on[:, None, None], blocks, 0.0)
         data = self._data
         data[:] = 0.0
         data[self._pos_k] = kdata[self._sel]
-        data[self._pos_c] = np.asarray(col).ravel()[self._keep_c]
-        data[self._pos_b] = np.asarray(row).ravel()
-        np.add.at(data, self._pos_t, np.asarray(blocks).ravel()[self._keep_t])
+        data[self._pos_c] = col.ravel()[self._keep_c]
+        data[self._pos_b] = row.ravel()
+        data[self._pos_d] = np.where(on, 0.0, 1.0)
+        np.add.at(data, self._pos_t, blocks.ravel()[self._keep_t])
         data[self._pos_e] = 1.0
         if self.comm.size > 1:
             self.mat.setValuesCSR(self._indptr, self._indices, data)
@@ -160,13 +169,17 @@ def bordered_dense(
     row: FloatArray,
     blocks: FloatArray,
     bc_rows: NDArray[np.intp],
+    active: NDArray[np.bool_] | None = None,
 ) -> FloatArray:
-    """Dense twin of :class:`BorderedMatrix` (one process): K (n, n) with the pairs' u rows
+    """Dense twin of :class:`BorderedMatrix` (one process): K (n, n) with the slots' u rows
     ``urows`` (m, 3) and the multipliers appended as rows and columns n..n+m-1."""
     n5, m = K.shape[0], len(urows)
     A = np.zeros((n5 + m, n5 + m))
     A[:n5, :n5] = K
     for j, u in enumerate(np.asarray(urows)):
+        if active is not None and not active[j]:
+            A[n5 + j, n5 + j] = 1.0
+            continue
         A[u, n5 + j] += col[j]
         A[np.ix_(u, u)] += blocks[j]
         A[n5 + j, u] += row[j]

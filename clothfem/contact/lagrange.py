@@ -304,6 +304,7 @@ class LagrangeContact:
         self._build_area_forms()
         self._K: PETSc.Mat | None = None
         self._kkt: BorderedMatrix | None = None
+        self._kkt_slots = np.zeros(0, dtype=np.intp)  # pairs with a multiplier row in _kkt
         # cumulative wall time [s] by part: fabric residual/tangent assembly, the contact layer
         # (projections, friction, bordered matrix), the linear solve
         self.timers = {"assembly": 0.0, "contact": 0.0, "solve": 0.0}
@@ -473,14 +474,35 @@ class LagrangeContact:
         return diag * (total / sdiag)
 
     # ------------------------------------------------------------------ algebra
-    def _kkt_matrix(self, nodes: NDArray[np.intp], bc_rows: NDArray[np.int32]) -> BorderedMatrix:
-        """The bordered matrix of the pairs on ``nodes``: kept while the active set and the
-        supports stay the same (the LU reuses its symbolic analysis), rebuilt otherwise."""
-        if self._kkt is None or not self._kkt.matches(nodes, bc_rows):
-            if self._kkt is not None:
-                self._kkt.destroy()
-            self._kkt = BorderedMatrix(self._K, nodes, bc_rows)
-        return self._kkt
+    def _kkt_matrix(
+        self, pairs: NDArray[np.intp], bc_rows: NDArray[np.int32]
+    ) -> tuple[BorderedMatrix, NDArray[np.intp], NDArray[np.bool_]]:
+        """The bordered matrix serving the active ``pairs`` (flat node * nb + body), the
+        position of each pair among its slots and the slots' in-use mask. Its slots are kept
+        while they contain the active pairs and are not more than twice as many (+ 16); a
+        new pattern takes the union with the old slots, so pairs that come and go between
+        Newton passes keep their slot (and the LU its analysis). Collective."""
+        kkt = self._kkt
+        slots = self._kkt_slots
+        fits = (
+            kkt is not None
+            and np.array_equal(kkt.bc_rows, bc_rows)
+            and len(slots) <= 2 * len(pairs) + 16
+            and bool(np.isin(pairs, slots).all())
+        )
+        if not self.comm.allreduce(fits, op=MPI.LAND):
+            if kkt is not None:
+                kkt.destroy()
+                union = np.union1d(slots, pairs)
+                slots = union if len(union) <= 2 * len(pairs) + 16 else pairs.copy()
+            else:
+                slots = pairs.copy()
+            kkt = self._kkt = BorderedMatrix(self._K, slots // self.nb, bc_rows)
+            self._kkt_slots = slots
+        where = np.searchsorted(slots, pairs)
+        used = np.zeros(len(slots), dtype=bool)
+        used[where] = True
+        return kkt, where, used
 
     def _contact_terms(self, x: FloatArray, pairs: NDArray[np.intp], lam: FloatArray):
         """Gap, normal and friction terms of the active (node, ellipsoid) pairs at ``x``."""
@@ -571,14 +593,20 @@ class LagrangeContact:
             t0 = time.perf_counter()
             self._K = m.jacobian(xv, self._K)
             t1 = time.perf_counter()
-            B = self._kkt_matrix(nodes // self.nb, bc_rows).update(self._K, col, -nrm, kt_blocks)
+            kkt, where, used = self._kkt_matrix(nodes, bc_rows)
+            ns = len(used)
+            slot_col, slot_row = np.zeros((ns, 3)), np.zeros((ns, 3))
+            slot_blocks = np.zeros((ns, 3, 3))
+            slot_col[where], slot_row[where], slot_blocks[where] = col, -nrm, kt_blocks
+            B = kkt.update(self._K, slot_col, slot_row, slot_blocks, used)
             t2 = time.perf_counter()
             self.timers["assembly"] += t1 - t0
             self.timers["contact"] += t2 - t1
             rhs, sol = B.createVecs()
             ra = rhs.getArray()
             ra[: 5 * n] = -r
-            ra[5 * n :] = gap
+            ra[5 * n :] = 0.0
+            ra[5 * n + where] = gap
             if B.getSizes() != self._ksp_sizes:  # the active set changed the system size
                 self.ksp.reset()
                 self.ksp.setFromOptions()
@@ -588,6 +616,7 @@ class LagrangeContact:
             self.timers["solve"] += time.perf_counter() - t2
             ok_solve = self.ksp.getConvergedReason() > 0
             s = sol.getArray(readonly=True).copy()
+            s = np.concatenate([s[: 5 * n], s[5 * n + where]])  # the slots in use
             rhs.destroy()
             sol.destroy()
             ok_solve = ok_solve and bool(np.all(np.isfinite(s)))

@@ -58,16 +58,16 @@ def _global_order(start, ms):
     return fab, lam
 
 
-def _expected(dense, start, nodes, col, row, blocks, bc):
+def _expected(dense, start, nodes, col, row, blocks, bc, active):
     """The dense twin on the gathered data, permuted to the bordered global numbering."""
     ms = COMM.allgather(len(nodes))
     fab, lam = _global_order(start, ms)
-    g = [np.concatenate(COMM.allgather(a)) for a in (col, row, blocks)]
+    g = [np.concatenate(COMM.allgather(a)) for a in (col, row, blocks, active)]
     urows = np.concatenate(
         [start[q] + 3 * nq[:, None] + np.arange(3) for q, nq in enumerate(COMM.allgather(nodes))]
     )
     g_bc = np.concatenate([start[q] + b for q, b in enumerate(COMM.allgather(bc))])
-    ref = bordered_dense(dense, urows, *g, g_bc)
+    ref = bordered_dense(dense, urows, *g[:3], g_bc, g[3])
     perm = np.concatenate([fab, lam])
     expect = np.zeros_like(ref)
     expect[np.ix_(perm, perm)] = ref
@@ -87,11 +87,13 @@ def test_bordered_matrix_matches_dense_twin(repeat_node: bool) -> None:
     col, row = rng.normal(size=(m, 3)), rng.normal(size=(m, 3))
     blocks = rng.normal(size=(m, 3, 3))
     bc = np.array([3 * n_own + 1, 0], dtype=np.int32) if COMM.rank == 0 else np.zeros(0, np.int32)
+    active = np.ones(m, dtype=bool)
+    active[-1] = False  # a slot not in use: identity row
     B = BorderedMatrix(K, nodes, bc)
-    A = B.update(K, col, row, blocks)
+    A = B.update(K, col, row, blocks, active)
     r0, r1 = A.getOwnershipRange()
     ncol = A.getSize()[1]
-    expect = _expected(dense, start, nodes, col, row, blocks, bc)
+    expect = _expected(dense, start, nodes, col, row, blocks, bc, active)
     assert np.array_equal(A.getValues(range(r0, r1), range(ncol)), expect[r0:r1])
     # the LU of the same matrix object follows new values (factorisation refreshed, the
     # symbolic analysis reused): solve, update, solve again, against NumPy
@@ -104,12 +106,12 @@ def test_bordered_matrix_matches_dense_twin(repeat_node: bool) -> None:
     ksp.setFromOptions()
     rhs, sol = A.createVecs()
     rhs.set(1.0)
-    for salt, scale in ((0.3, 1.0), (1.1, 2.0)):
+    for salt, scale, on in ((0.3, 1.0, active), (1.1, 2.0, ~active)):
         K2, dense2, _, _ = _fabric_tangent(salt)
-        assert B.update(K2, scale * col, row, blocks) is A
+        assert B.update(K2, scale * col, row, blocks, on) is A
         ksp.setOperators(A)
         ksp.solve(rhs, sol)
-        expect = _expected(dense2, start, nodes, scale * col, row, blocks, bc)
+        expect = _expected(dense2, start, nodes, scale * col, row, blocks, bc, on)
         x = np.linalg.solve(expect, np.ones(len(expect)))
         assert np.allclose(sol.getArray(), x[r0:r1], rtol=1e-10, atol=1e-12)
     ksp.destroy()

@@ -80,6 +80,51 @@ def test_curve_error_not_covered_is_nan():
         R.curve_error(a, a, a, a, lo=10.0, hi=10.0)
 
 
+def test_moving_average_of_linear_function_is_exact_inside():
+    rng = np.random.default_rng(0)
+    a = np.sort(np.r_[0.0, rng.uniform(0.0, 30.0, 60), 30.0])  # non-uniform, ends 0 and 30
+    f = 2.0 - 0.3 * a
+    w = 4.0
+    order = rng.permutation(a.size)  # unsorted input, values returned in the given order
+    s = R.moving_average(a[order], f[order], w)
+    inner = (a[order] >= w / 2) & (a[order] <= 30.0 - w / 2)
+    assert inner.sum() > 40
+    np.testing.assert_allclose(s[inner], f[order][inner], rtol=0, atol=1e-12)
+    # at the ends the window is truncated to [0, w/2]: the mean of a line is its midpoint value
+    at = np.array([0.0, 30.0, 15.0, -3.0, 40.0])
+    s = R.moving_average(a, f, w, at=at)
+    np.testing.assert_allclose(
+        s[:3], [2.0 - 0.3 * w / 4, 2.0 - 0.3 * (30 - w / 4), -2.5], atol=1e-12
+    )
+    assert math.isnan(s[3]) and math.isnan(s[4])  # the window misses [0, 30]
+    assert R.moving_average(a, f, 0.0).tolist() == f.tolist()  # window 0: unchanged
+
+
+def test_curve_error_window_removes_a_full_period_of_noise():
+    a = np.linspace(0.0, 20.0, 4001)
+    ref = 1.0 + 0.1 * a
+    noisy = ref + 0.5 * np.sin(2 * np.pi * a / 1.0)  # period 1 deg
+    # raw: int_5^15 noise^2 = 0.5^2 / 2 * 10 (ten full periods); int_5^15 ref^2 = [ref^3 / 0.3]
+    ref2 = ((1.0 + 0.1 * 15) ** 3 - (1.0 + 0.1 * 5) ** 3) / 0.3
+    raw = math.sqrt(0.5**2 / 2 * 10 / ref2)
+    assert R.curve_error(a, ref, a, noisy, lo=5.0, hi=15.0) == pytest.approx(raw, rel=1e-2)
+    assert R.curve_error(a, ref, a, noisy, lo=5.0, hi=15.0, window=0.0) == pytest.approx(
+        raw, rel=1e-2
+    )
+    assert R.curve_error(a, ref, a, noisy, lo=5.0, hi=15.0, window=1.0) < 1e-3
+    # a curve that does not cover [lo, hi] stays nan with a window
+    assert math.isnan(R.curve_error(a, ref, a[a < 14], noisy[a < 14], lo=5, hi=15, window=1.0))
+
+
+@pytest.mark.parametrize("window", [-1.0, -1e-9, math.nan, math.inf])
+def test_curve_error_bad_window_raises(window):
+    a = np.array([0.0, 10.0])
+    with pytest.raises(ValueError, match="window"):
+        R.curve_error(a, a + 1, a, a + 1, lo=0.0, hi=10.0, window=window)
+    with pytest.raises(ValueError, match="window"):
+        R.moving_average(a, a, window)
+
+
 def test_torque_at_interpolates_and_reports_unreached():
     a = np.array([0.0, 10.0, 20.0, 56.99999999999])
     t = np.array([1.0, 2.0, 4.0, 5.0])
