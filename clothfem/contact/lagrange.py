@@ -15,7 +15,10 @@ Being outside the union means being outside every ellipsoid, so the constraints 
 normal ``n_ik`` of ellipsoid ``k`` (:func:`~clothfem.contact.geometry.closest_point_ellipsoid`).
 Each gap is smooth; projecting on the union instead switches a node between ellipsoids in the
 concave crease where two of them meet (the elbow), and Newton then cycles (measured on the
-arm-sleeve scene at 33 degrees of flexion). A node in the crease has two constraints.
+arm-sleeve scene at 33 degrees of flexion). A node normally carries one constraint, on its
+most penetrated ellipsoid, chosen between Newton solves; a node pushed into the crease can
+end with two (one per ellipsoid, when the anti-cycling rule below keeps a pair that kept
+switching), which is the physical answer there (both surfaces hold it).
 Since ``d gap / d x = n`` for an exact projection, the constraint row is ``G_ik = n_ik^T`` on
 the three ``u`` dofs of node ``i`` (Eq. 21 with a rigid master: the master dofs are
 prescribed, not unknowns).
@@ -593,12 +596,12 @@ class LagrangeContact:
             t0 = time.perf_counter()
             self._K = m.jacobian(xv, self._K)
             t1 = time.perf_counter()
-            kkt, where, used = self._kkt_matrix(nodes, bc_rows)
-            ns = len(used)
+            kkt, where, in_use = self._kkt_matrix(nodes, bc_rows)
+            ns = len(in_use)
             slot_col, slot_row = np.zeros((ns, 3)), np.zeros((ns, 3))
             slot_blocks = np.zeros((ns, 3, 3))
             slot_col[where], slot_row[where], slot_blocks[where] = col, -nrm, kt_blocks
-            B = kkt.update(self._K, slot_col, slot_row, slot_blocks, used)
+            B = kkt.update(self._K, slot_col, slot_row, slot_blocks, in_use)
             t2 = time.perf_counter()
             self.timers["assembly"] += t1 - t0
             self.timers["contact"] += t2 - t1
@@ -667,6 +670,7 @@ class LagrangeContact:
         n = self.n
         saved_u, saved_t = m.u.x.array.copy(), m.theta.x.array.copy()
         saved_active, saved_lam = self._act.copy(), self._lam.copy()
+        saved_load = float(m.lam.value)
         m.set_load_factor(lam_load)
         bc_rows, bc_vals = m.bc_rows_and_values(lam_load)
         fixed = np.zeros(3 * n, dtype=int)
@@ -716,7 +720,9 @@ class LagrangeContact:
             move = active.any(axis=1) & penetrating & (gmin < own - self.gap_tol)
             drop |= active & move[:, None]
             add = onehot & (penetrating & ~active.any(axis=1) | move)[:, None]
-            # pairs that kept flipping in this step stay active (see the loop below)
+            # pairs that kept flipping in this step stay active (see the loop below), even
+            # where the rule above moved the node to the other ellipsoid: a node pushed into
+            # the crease then keeps both constraints
             drop &= ~frozen
             add |= frozen & ~active
             return drop, add, self.comm.allreduce(int(drop.sum() + add.sum()), op=MPI.SUM)
@@ -732,7 +738,7 @@ class LagrangeContact:
             )
             newton_total += its
             if not ok:
-                self._restore(saved_u, saved_t, saved_active, saved_lam)
+                self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
                 raise ContactDivergence(
                     f"Newton failed at load factor {lam_load:.6g} in active-set pass {sets} "
                     f"({len(pairs)} active node-ellipsoid pairs on rank {self.comm.rank})"
@@ -743,7 +749,7 @@ class LagrangeContact:
             if changes == 0:  # (an early exit always has changes: same test)
                 break
             if sets >= p.max_active_set:
-                self._restore(saved_u, saved_t, saved_active, saved_lam)
+                self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
                 raise ContactDivergence(
                     f"active set still changing after {sets} passes at load factor "
                     f"{lam_load:.6g} ({changes} changes)"
@@ -755,11 +761,11 @@ class LagrangeContact:
             # largest multiplier the step fails (and is cut) instead of accepting adhesion
             flips += drop | add
             frozen |= flips >= 6
-        if frozen.any() or self.comm.allreduce(bool(frozen.any()), op=MPI.LOR):
+        if self.comm.allreduce(bool(frozen.any()), op=MPI.LOR):  # collective on every rank
             lam_max = self.comm.allreduce(float(np.max(np.abs(lam_pairs), initial=0.0)), op=MPI.MAX)
             pull = float(np.min(lam_pairs.reshape(n, self.nb)[frozen], initial=0.0))
             if self.comm.allreduce(pull < -1e-2 * lam_max, op=MPI.LOR):
-                self._restore(saved_u, saved_t, saved_active, saved_lam)
+                self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
                 raise ContactDivergence(
                     f"active set cycling at load factor {lam_load:.6g}: a pair kept active "
                     f"pulls with {pull:.3g} N"
@@ -865,8 +871,9 @@ class LagrangeContact:
                 h *= 2.0
         return records
 
-    def _restore(self, u, th, active, lam) -> None:
+    def _restore(self, u, th, active, lam, load_factor: float) -> None:
         m = self.model
+        m.set_load_factor(load_factor)
         m.u.x.array[:] = u
         m.theta.x.array[:] = th
         m.update_director()
