@@ -339,6 +339,7 @@ def main(argv: list[str] | None = None) -> int:
         f"- error_smooth: the same of the curves' centred {SMOOTH_DEG:g}-deg moving averages"
         " (each cut to its own angle range): the trend, oscillation filtered",
         "",
+        "",
     ]
     verdict = cheapest(rows, ref)
     text = "\n".join(head) + markdown_table(rows, MD_COLUMNS) + "\n"
