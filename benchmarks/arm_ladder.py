@@ -108,6 +108,7 @@ QUICK_LADDER: list[dict[str, Any]] = [
     {"name": "dt0.02", "solver.dt": 0.02},
     {"name": "dt0.005", "solver.dt": 0.005},
     {"name": "mesh12x16", "mesh.n_around": 12, "mesh.n_along": 16},
+    {"name": "mesh16x20", "mesh.n_around": 16, "mesh.n_along": 20},  # dt error of the reference
     {"name": "static", "solver.integrator": "static"},
     {
         "name": "ref16x20_dt0.005",
