@@ -196,7 +196,7 @@ def curve_error(
         a, t = _sorted(a, t)
         if a.size == 0 or a[0] > lo + _ATOL or a[-1] < hi - _ATOL:
             return math.nan
-        curves.append(np.interp(grid, a, t) if w == 0.0 else moving_average(a, t, w, at=grid))
+        curves.append(moving_average(a, t, w, at=grid))  # window 0: interpolated
 
     def trap(f: np.ndarray) -> float:  # uniform spacing cancels in the ratio
         return float(f.sum() - 0.5 * (f[0] + f[-1]))
