@@ -139,6 +139,12 @@ class LagrangeContactParameters:
         no Newton solve to convergence with a set that is already known to be wrong); later
         passes converge Newton with a fixed set (the paper's trial-and-error procedure),
         which cannot cycle inside Newton. 0: always the latter.
+    release_penetration: in m (> 0); None means ``1e-2 * thickness``. A pair that keeps
+        switching in and out of the active set (6 times in a step) is kept active; if it then
+        pulls on the body by more than 1 % of the largest multiplier, it is released for the
+        rest of the step instead, and the step is accepted if such a released pair penetrates
+        by at most release_penetration (reported as the step's max_penetration); otherwise
+        the step fails (and is cut).
     prefix: PETSc options prefix of the bordered linear solve.
     """
 
@@ -151,12 +157,13 @@ class LagrangeContactParameters:
     max_newton: int = 50
     max_active_set: int = 30
     semismooth_passes: int = 5
+    release_penetration: float | None = None
     prefix: str = "contact_lagrange_"
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.mu) and self.mu >= 0):
             raise ValueError(f"mu must be a finite friction coefficient >= 0, got {self.mu!r}")
-        for name in ("tangential_penalty", "gap_tolerance"):
+        for name in ("tangential_penalty", "gap_tolerance", "release_penetration"):
             v = getattr(self, name)
             if v is not None and not (math.isfinite(v) and v > 0):
                 unit = "N/m" if name == "tangential_penalty" else "m"
@@ -274,6 +281,8 @@ class LagrangeContact:
         mat = model.material
         t = model.thickness
         self.gap_tol = params.gap_tolerance if params.gap_tolerance is not None else 1e-4 * t
+        rp = params.release_penetration
+        self.release_penetration = rp if rp is not None else 1e-2 * t
         lo = self.X.min(axis=0) if n else np.full(3, np.inf)
         hi = self.X.max(axis=0) if n else np.full(3, -np.inf)
         self.comm.Allreduce(MPI.IN_PLACE, lo, op=MPI.MIN)
@@ -694,6 +703,7 @@ class LagrangeContact:
         fr = None
         flips = np.zeros(active.shape, dtype=int)
         frozen = np.zeros(active.shape, dtype=bool)
+        released = np.zeros(active.shape, dtype=bool)  # cycling pairs let go for this step
 
         def changes_of(xv: PETSc.Vec, pairs, lam_a) -> tuple[NDArray, NDArray, int]:
             """Pairs to release (tensile multiplier) and to add (penetrating), and their
@@ -701,7 +711,7 @@ class LagrangeContact:
             lam_all = np.zeros(n * self.nb)
             lam_all[pairs] = lam_a
             x = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
-            gap = self._gaps(x)
+            gap = np.where(released, np.inf, self._gaps(x))
             lam_max = self.comm.allreduce(
                 float(np.max(np.abs(lam_a))) if len(lam_a) else 0.0, op=MPI.MAX
             )
@@ -727,48 +737,73 @@ class LagrangeContact:
             add |= frozen & ~active
             return drop, add, self.comm.allreduce(int(drop.sum() + add.sum()), op=MPI.SUM)
 
-        while True:
-            sets += 1
-            pairs = np.flatnonzero(active.ravel())
-            early = None
-            if p.semismooth_passes >= sets:  # the set may change inside Newton (semismooth)
-                early = lambda xv, lam_a, pairs=pairs: changes_of(xv, pairs, lam_a)[2] > 0  # noqa: E731
-            ok, its, lam_a, fr = self._newton(
-                xv, pairs, lam_pairs[pairs], bc_rows, bc_vals, set_changed=early
-            )
-            newton_total += its
-            if not ok:
-                self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
-                raise ContactDivergence(
-                    f"Newton failed at load factor {lam_load:.6g} in active-set pass {sets} "
-                    f"({len(pairs)} active node-ellipsoid pairs on rank {self.comm.rank})"
+        while True:  # (a second round only after cycling pairs were released)
+            while True:
+                sets += 1
+                pairs = np.flatnonzero(active.ravel())
+                early = None
+                if p.semismooth_passes >= sets:  # the set may change inside Newton (semismooth)
+                    early = lambda xv, lam_a, pairs=pairs: changes_of(xv, pairs, lam_a)[2] > 0  # noqa: E731
+                ok, its, lam_a, fr = self._newton(
+                    xv, pairs, lam_pairs[pairs], bc_rows, bc_vals, set_changed=early
                 )
-            lam_pairs[:] = 0.0
-            lam_pairs[pairs] = lam_a
-            drop, add, changes = changes_of(xv, pairs, lam_a)
-            if changes == 0:  # (an early exit always has changes: same test)
+                newton_total += its
+                if not ok:
+                    self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
+                    raise ContactDivergence(
+                        f"Newton failed at load factor {lam_load:.6g} in active-set pass {sets} "
+                        f"({len(pairs)} active node-ellipsoid pairs on rank {self.comm.rank})"
+                    )
+                lam_pairs[:] = 0.0
+                lam_pairs[pairs] = lam_a
+                drop, add, changes = changes_of(xv, pairs, lam_a)
+                if changes == 0:  # (an early exit always has changes: same test)
+                    break
+                if sets >= p.max_active_set:
+                    self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
+                    raise ContactDivergence(
+                        f"active set still changing after {sets} passes at load factor "
+                        f"{lam_load:.6g} ({changes} changes)"
+                    )
+                active = (active & ~drop) | add
+                lam_pairs[drop.ravel()] = 0.0
+                # anti-cycling: a pair switched in or out 6 times in one step is kept active for
+                # the rest of the step (adhesion up to 1 % of the largest multiplier accepted)
+                flips += drop | add
+                frozen |= (flips >= 6) & ~released
+            # a kept pair that pulls by more than 1 % of the largest multiplier is let go for
+            # the rest of the step (once); the step then stands if it penetrates by at most
+            # release_penetration (checked below)
+            if not self.comm.allreduce(bool(frozen.any()), op=MPI.LOR):  # on every rank
                 break
-            if sets >= p.max_active_set:
-                self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
-                raise ContactDivergence(
-                    f"active set still changing after {sets} passes at load factor "
-                    f"{lam_load:.6g} ({changes} changes)"
-                )
-            active = (active & ~drop) | add
-            lam_pairs[drop.ravel()] = 0.0
-            # anti-cycling: a pair switched in or out 6 times in one step is kept active for
-            # the rest of the step; if it then pulls on the body by more than 1 % of the
-            # largest multiplier the step fails (and is cut) instead of accepting adhesion
-            flips += drop | add
-            frozen |= flips >= 6
-        if self.comm.allreduce(bool(frozen.any()), op=MPI.LOR):  # collective on every rank
             lam_max = self.comm.allreduce(float(np.max(np.abs(lam_pairs), initial=0.0)), op=MPI.MAX)
-            pull = float(np.min(lam_pairs.reshape(n, self.nb)[frozen], initial=0.0))
-            if self.comm.allreduce(pull < -1e-2 * lam_max, op=MPI.LOR):
+            lam_nb = lam_pairs.reshape(n, self.nb)
+            pulling = frozen & (lam_nb < -1e-2 * lam_max)
+            if not self.comm.allreduce(bool(pulling.any()), op=MPI.LOR):
+                break
+            pull = self.comm.allreduce(float(np.min(lam_nb[pulling], initial=0.0)), op=MPI.MIN)
+            if self.comm.allreduce(bool(released.any()), op=MPI.LOR):
                 self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
                 raise ContactDivergence(
                     f"active set cycling at load factor {lam_load:.6g}: a pair kept active "
-                    f"pulls with {pull:.3g} N"
+                    f"pulls with {pull:.3g} N after cycling pairs were released"
+                )
+            log.debug("active set cycling: releasing pairs that pull with up to %.3g N", pull)
+            released |= pulling
+            frozen &= ~pulling
+            active &= ~pulling
+            lam_pairs[pulling.ravel()] = 0.0
+        if self.comm.allreduce(bool(released.any()), op=MPI.LOR):
+            x = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
+            depth = self.comm.allreduce(
+                float(-np.min(self._gaps(x)[released], initial=np.inf)), op=MPI.MAX
+            )
+            if depth > self.release_penetration:
+                self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
+                raise ContactDivergence(
+                    f"active set cycling at load factor {lam_load:.6g}: a released pair "
+                    f"penetrates by {depth:.3g} m > release_penetration "
+                    f"{self.release_penetration:.3g} m"
                 )
         # commit
         m.set_state(xv)

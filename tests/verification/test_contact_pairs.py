@@ -250,7 +250,7 @@ def test_node_pushed_into_crease_is_held_by_both_ellipsoids():
 R0S, L0S, RBS = 0.05, 0.2, 0.052  # sleeve on a rigid cylinder (test_contact_lagrange)
 
 
-def _sleeve_on_cylinder():
+def _sleeve_on_cylinder(release_penetration=None):
     """Frictionless sleeve stretched 4 % over a rigid cylinder: every node in contact."""
     sm = meshes.cylinder(COMM, radius=R0S, length=L0S, n_around=16, n_along=4)
     model = ShellModel(
@@ -263,14 +263,15 @@ def _sleeve_on_cylinder():
         ],
     )
     body = (np.array([L0S / 2, 0.0, 0.0]), np.eye(3), np.array([10.0, 0.999 * R0S, 0.999 * R0S]))
-    contact = LagrangeContact(model, [body])
+    params = LagrangeContactParameters(release_penetration=release_penetration)
+    contact = LagrangeContact(model, [body], params=params)
     for r in (1.01 * R0S, 0.5 * (1.01 * R0S + RBS), RBS):
         contact.set_pose(0, radii=(10.0, r, r))
         contact.solve_step(0.0)
     return model, contact
 
 
-@pytest.mark.parametrize("mode", ["pull", "weak_pull", "released"])
+@pytest.mark.parametrize("mode", ["pull", "pull_let_go", "weak_pull", "released"])
 def test_anticycling_guard(monkeypatch, mode):
     """Control flow of the anti-cycling guard, with a simulated cycling pair.
 
@@ -284,16 +285,19 @@ def test_anticycling_guard(monkeypatch, mode):
     re-activations) P must be kept active, so the wrapper sees P active exactly 4 times
     (passes 1, 3, 5, 7); without the guard it would keep flipping until max_active_set.
 
-    * ``pull``: P keeps pulling with 50 % of the largest multiplier: the step must raise
-      ContactDivergence ("cycling") and restore u, theta, the active pairs and the
-      multipliers exactly (step counter unchanged).
+    * ``pull``: P keeps pulling with 50 % of the largest multiplier: P is let go for the
+      rest of the step, its node then sinks into the cylinder by more than the default
+      release_penetration (1 % of t), so the step must raise ContactDivergence and restore
+      u, theta, the active pairs and the multipliers exactly (step counter unchanged).
+    * ``pull_let_go``: the same with release_penetration = 1 m: the step must converge with
+      P inactive and report P's node's depth (> gap tolerance) as its max_penetration.
     * ``weak_pull``: P pulls with 0.5 % (< the 1 % adhesion allowance) every time: the step
       must converge with P active, its multiplier being that small tensile value.
     * ``released``: P pulls only the first 3 times, then Newton's own multiplier is
       returned: the step must converge with P active, lam_P >= 0, at the previous
       equilibrium (the problem did not change).
     """
-    model, contact = _sleeve_on_cylinder()
+    model, contact = _sleeve_on_cylinder(1.0 if mode == "pull_let_go" else None)
     act0, lam0 = contact._act.copy(), contact._lam.copy()
     u0, th0 = model.u.x.array.copy(), model.theta.x.array.copy()
     steps0 = contact.step_count
@@ -312,7 +316,7 @@ def test_anticycling_guard(monkeypatch, mode):
         if where.size:
             seen.append(float(lam_a[where[0]]))
             big = float(np.max(np.abs(lam_a)))
-            value = {"pull": -0.5 * big, "weak_pull": -5e-3 * big}.get(mode, -0.5 * big)
+            value = -5e-3 * big if mode == "weak_pull" else -0.5 * big
             if mode != "released" or len(seen) <= 3:
                 lam_a = lam_a.copy()
                 lam_a[where] = value
@@ -321,7 +325,7 @@ def test_anticycling_guard(monkeypatch, mode):
     monkeypatch.setattr(LagrangeContact, "_newton", cycling_newton)
     lam_load = float(model.lam.value)
     if mode == "pull":
-        with pytest.raises(ContactDivergence, match="cycling"):
+        with pytest.raises(ContactDivergence, match="released pair penetrates by"):
             contact.solve_step(lam_load)
         restored = (
             len(seen) == 4
@@ -344,6 +348,12 @@ def test_anticycling_guard(monkeypatch, mode):
     rec = contact.solve_step(lam_load)
     assert _all(len(seen) == 4), seen
     assert contact.step_count == steps0 + 1
+    if mode == "pull_let_go":
+        assert _all(not contact._act.ravel()[P])
+        depth = -float(_gaps(contact).ravel()[P])
+        assert _allmin(depth) > contact.gap_tol
+        assert rec.max_penetration == pytest.approx(_allmax(depth), rel=1e-12)
+        return
     assert _all(contact._act.ravel()[P])
     lam_P = float(contact._lam.ravel()[P])
     lam_max = _allmax(np.abs(contact._lam[contact._act]))
