@@ -1,12 +1,14 @@
 """Shared plumbing of the arm-sleeve benchmark drivers (``arm_studies.py``, ``arm_ladder.py``,
 ``arm_extreme.py``): one case = one ``clothfem run`` subprocess in its own folder.
 
-A case is a name plus a list of ``--set`` overrides of ``demos/scenes/arm_sleeve.toml``. Its
+A case is a name plus a list of ``--set`` overrides of ``demos/scenes/arm_sleeve.toml`` and a
+number of MPI ranks (``Case.ranks``, default 1: a plain serial run; N > 1: the same command
+under ``mpirun --allow-run-as-root --oversubscribe -n N <python> -m mpi4py``). Its
 folder ``OUT/<study>/<case>/`` holds what ``clothfem run`` writes (``history.csv``,
 ``summary.json``, PNGs, XDMF) and what the driver adds: ``command.txt`` (the exact command),
 ``stdout.log`` / ``stderr.log`` and ``case.json`` (exit status, wall time measured by the
-driver, the overrides). A case whose ``summary.json`` says ``completed`` with the same
-overrides is not run again unless ``force`` (so an interrupted study resumes where it
+driver, the overrides, the ranks). A case whose ``summary.json`` says ``completed`` with the
+same overrides and ranks is not run again unless ``force`` (so an interrupted study resumes where it
 stopped); while ``clothfem run`` does not write ``summary.json`` yet, ``case.json`` with exit
 status 0 stands in for it.
 
@@ -55,9 +57,11 @@ __all__ = [
     "SMOOTH_DEG",
     "Case",
     "RowWriter",
+    "MPIRUN",
     "add_common_args",
     "angle_max_sets",
     "case_result",
+    "command",
     "curve_error",
     "fmt",
     "markdown_table",
@@ -75,12 +79,18 @@ __all__ = [
 @dataclass
 class Case:
     """One run: ``name`` (its folder), ``sets`` (``key.path=value`` overrides, in order),
-    ``params`` (columns for the tables, e.g. ``{"mu": 0.5}``)."""
+    ``params`` (columns for the tables, e.g. ``{"mu": 0.5}``), ``ranks`` (MPI ranks: 1 runs
+    ``clothfem run`` plainly, N > 1 under ``mpirun -n N``; see :func:`command`)."""
 
     name: str
     sets: list[str]
     params: dict[str, Any] = field(default_factory=dict)
     scene: Path = SCENE
+    ranks: int = 1
+
+    def __post_init__(self) -> None:
+        if isinstance(self.ranks, bool) or not isinstance(self.ranks, int) or self.ranks < 1:
+            raise ValueError(f"case {self.name}: ranks must be an int >= 1, got {self.ranks!r}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -168,8 +178,15 @@ def angle_max_sets(angle_max: float | None, scene: Path = SCENE) -> list[str]:
 # running a case
 
 
-def _command(case: Case, out: Path, extra: Sequence[str]) -> list[str]:
+MPIRUN = ("mpirun", "--allow-run-as-root", "--oversubscribe")
+
+
+def command(case: Case, out: Path, extra: Sequence[str] = ()) -> list[str]:
+    """The ``clothfem run`` command of a case (``extra``: overrides after the case's own);
+    with ``case.ranks`` > 1 under ``mpirun -n ranks <python> -m mpi4py``."""
     cmd = [sys.executable, "-m", "clothfem.cli", "run", str(case.scene), "--out", str(out)]
+    if case.ranks > 1:
+        cmd = [*MPIRUN, "-n", str(case.ranks), sys.executable, "-m", "mpi4py", *cmd[1:]]
     for s in [*case.sets, *extra]:
         cmd += ["--set", s]
     return cmd
@@ -182,10 +199,11 @@ def _load_json(path: Path) -> dict[str, Any] | None:
         return None
 
 
-def _done_before(folder: Path, sets: list[str]) -> bool:
-    """True if the folder holds a completed run with the same overrides."""
+def _done_before(folder: Path, sets: list[str], ranks: int = 1) -> bool:
+    """True if the folder holds a completed run with the same overrides (and ranks; a
+    case.json without ``ranks`` was a serial run)."""
     rec = _load_json(folder / "case.json")
-    if rec is not None and rec.get("sets") != sets:
+    if rec is not None and (rec.get("sets") != sets or rec.get("ranks", 1) != ranks):
         return False  # other overrides (e.g. another --angle-max): not the same case
     summary = _load_json(folder / "summary.json")
     if summary is not None:
@@ -199,7 +217,10 @@ def _run(cmd: list[str], folder: Path, timeout: float | None) -> tuple[int, floa
     and keeps its rows), then SIGKILL after 60 s."""
     t0 = time.perf_counter()
     timed_out = False
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    # one BLAS thread per process (as make sets it), and no MPI environment of a driver that
+    # was itself started under mpirun (it would break the child's own mpirun)
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
+    env.update(PYTHONUNBUFFERED="1", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
     with open(folder / "stdout.log", "w") as so, open(folder / "stderr.log", "w") as se:
         proc = subprocess.Popen(
             cmd, stdout=so, stderr=se, cwd=ROOT, env=env, start_new_session=True
@@ -252,9 +273,9 @@ def run_cases(
                 if on_result is not None:
                     on_result(case, row)
             continue
-        cmd = _command(case, folder, args.extra_set)
+        cmd = command(case, folder, args.extra_set)
         sets = [*case.sets, *args.extra_set]
-        skip = not args.force and _done_before(folder, sets)
+        skip = not args.force and _done_before(folder, sets, case.ranks)
         if args.dry_run:
             print(("# done, skipped: " if skip else "") + shlex.join(cmd))
             continue
@@ -268,6 +289,7 @@ def run_cases(
                 not args.force
                 and before.get("timed_out")
                 and before.get("sets") == sets
+                and before.get("ranks", 1) == case.ranks
                 and (folder / "checkpoint").is_dir()
             )
             if resume:
@@ -284,6 +306,8 @@ def run_cases(
             wall += float(before.get("wall_s", 0.0)) if resume else 0.0
             rec = {"sets": sets, "returncode": code, "wall_s": wall, "timed_out": timed_out}
             rec["resumed"] = bool(resume)
+            if case.ranks > 1:
+                rec["ranks"] = case.ranks
             if timed_out:
                 rec["timeout_s"] = args.timeout
             (folder / "case.json").write_text(json.dumps(rec, indent=1) + "\n")

@@ -2,18 +2,39 @@ r"""Error against run time on the arm-sleeve scene: a ladder of discretisation s
 
 Each rung of LADDER (below: a dict of ``--set`` overrides on top of BASE) is one
 ``clothfem run demos/scenes/arm_sleeve.toml`` subprocess in ``OUT/ladder/<name>/``; a rung
-whose summary.json already says completed (same overrides) is skipped unless ``--force``.
-The rungs vary one thing at a time around BASE (16x20 quadratic mesh, Newmark gamma 0.6,
-dt = 0.01 s): the mesh (8x10, 12x16, 16x20, 24x30), the geometry order (mesh.order 1 vs 2),
-the time step (solver.dt 0.02, 0.01, 0.005) and the integrator (static vs newmark).
+whose summary.json already says completed (same overrides and ranks) is skipped unless
+``--force``. The rungs vary one thing at a time around BASE (16x20 quadratic mesh, Newmark
+gamma 0.6, dt = 0.01 s): the mesh (8x10, 12x16, 16x20, 24x30), the geometry order
+(mesh.order 1 vs 2), the time step (solver.dt 0.02, 0.01, 0.005) and the integrator (static
+vs newmark); one more rung repeats the reference on 2 MPI ranks (the round-off floor, below).
 
 **Reference** = the rung marked ``"reference": True``: the finest setting, 24x30 quadratic
 mesh with Newmark dt = 0.005 s (``--quick``: 16x20, dt = 0.005 s, around the 8x10 default).
 
+**Round-off floor.** The scene is sensitive to round-off: the same default scene run
+serially and under ``mpirun -n 2`` differed by 3.3 % (raw relative L2 over 2-40 deg) and
+10 % (40-57 deg), measured 2026-11-23. So both ladders end with the rung
+``<reference>_np2`` (``"floor": True``, ``"ranks": 2``): the reference's settings run as
+``mpirun --allow-run-as-root --oversubscribe -n 2 <python> -m mpi4py -m clothfem.cli run
+...``. Its errors against the serial reference (raw and smoothed, each in its own norm) are
+the round-off floor F of that norm: differences smaller than F are not resolved by the
+scene. The floor rung is never a candidate for "cheapest within X"; a threshold X below F
+is flagged in those statements (printed and in ladder.md), F is stated in ladder.md and
+drawn in ladder.png. If the floor rung has no error (not run, no rows, or it stopped
+before A), the floor is "not measured" and nothing is flagged. (With several floor rungs,
+F is the largest of their errors.)
+
+A rung is a dict: ``"name"``, optionally ``"reference": True``, ``"floor": True`` and
+``"ranks": N`` (int >= 1, default 1; ``mpirun -n N`` if N > 1), every other key a scene key
+(a ``--set`` path) replacing BASE's. ``ranks`` and ``floor`` are not scene keys and never
+become ``--set`` overrides.
+
 **Errors**, both ``clothfem.report.curve_error`` of |tau| (torque_mag) against the angle,
 relative L2 over [2, A] deg, where A is the largest angle every compared run reached: the
 smallest final angle of the reference and of the rungs that completed (if no rung completed:
-of all rungs); ``--angle A`` sets it:
+of all rungs); the floor rung counts here like any other rung (if it completed, its final
+angle can lower A; if it stopped early while others completed, it does not lower A and has
+no error, so the floor is not measured); ``--angle A`` sets it:
 
 * ``error`` (raw): the curves themselves, pointwise. The Newmark curves carry step-to-step
   dynamic oscillation (period of a few degrees) that differs from rung to rung and counts
@@ -27,10 +48,14 @@ Rungs that stopped before A are listed with their reached angle and no error. If
 (quick checks) the range is [A/2, A]. Wall time = summary wall_time (else the last
 ``elapsed`` of history.csv).
 
-Outputs: ``OUT/ladder.csv`` (a row as each rung finishes; the error columns are filled when
-the ladder ends), ``OUT/ladder.md`` (table), ``OUT/ladder.png`` (log-log error vs wall time,
-raw as filled circles, smoothed as open squares, points labelled); printed: the cheapest
-rung within 5 %, 2 % and 1 % of the reference, for each of the two errors.
+Outputs: ``OUT/ladder.csv`` (a row as each rung finishes, with its ``ranks`` and ``floor``
+columns; the error columns are filled when the ladder ends), ``OUT/ladder.md`` (table, the
+round-off floor of each norm, the cheapest rungs), ``OUT/ladder.png`` (log-log error vs wall
+time, raw as filled circles, smoothed as open squares, points labelled; the floors as
+horizontal dashed lines in the colour of their norm); printed: the floors and the cheapest
+rung (floor rung excluded) within 5 %, 2 % and 1 % of the reference, for each of the two
+errors, a threshold below that norm's floor flagged as not resolved. The wall time of the
+floor rung is that of its 2-rank run.
 
 Run (full ladder: hours on 2 cores):
 
@@ -76,14 +101,31 @@ from _arm_common import (  # noqa: E402
 )
 
 # --- the ladder (edit here) -------------------------------------------------------------------
-# BASE: overrides of every rung; a rung: "name", optional "reference": True, other keys are
-# scene keys (--set paths) replacing BASE's.
+# BASE: overrides of every rung; a rung: "name", optional "reference": True, "floor": True,
+# "ranks": N (MPI ranks, default 1), other keys are scene keys (--set paths) replacing BASE's.
 BASE: dict[str, Any] = {
     "mesh.n_around": 16,
     "mesh.n_along": 20,
     "mesh.order": 2,
     "solver.integrator": "newmark",
     "solver.dt": 0.01,
+}
+RUNG_KEYS = ("name", "reference", "floor", "ranks")  # rung keys that are not scene keys
+
+
+def floor_rung(rung: dict[str, Any], ranks: int = 2) -> dict[str, Any]:
+    """The round-off floor rung of a reference rung: its settings on ``ranks`` MPI ranks,
+    named ``<name>_np<ranks>``."""
+    keys = {k: v for k, v in rung.items() if k not in RUNG_KEYS}
+    return {"name": f"{rung['name']}_np{ranks}", "floor": True, "ranks": ranks, **keys}
+
+
+REF: dict[str, Any] = {
+    "name": "ref24x30_dt0.005",
+    "reference": True,
+    "mesh.n_around": 24,
+    "mesh.n_along": 30,
+    "solver.dt": 0.005,
 }
 LADDER: list[dict[str, Any]] = [
     {"name": "mesh8x10", "mesh.n_around": 8, "mesh.n_along": 10},
@@ -94,14 +136,16 @@ LADDER: list[dict[str, Any]] = [
     {"name": "dt0.02", "solver.dt": 0.02},
     {"name": "dt0.005", "solver.dt": 0.005},
     {"name": "static", "solver.integrator": "static"},
-    {
-        "name": "ref24x30_dt0.005",
-        "reference": True,
-        "mesh.n_around": 24,
-        "mesh.n_along": 30,
-        "solver.dt": 0.005,
-    },
+    REF,
+    floor_rung(REF),  # ref24x30_dt0.005_np2: the reference on 2 ranks (round-off floor)
 ]
+QUICK_REF: dict[str, Any] = {
+    "name": "ref16x20_dt0.005",
+    "reference": True,
+    "mesh.n_around": 16,
+    "mesh.n_along": 20,
+    "solver.dt": 0.005,
+}
 QUICK_BASE: dict[str, Any] = {**BASE, "mesh.n_around": 8, "mesh.n_along": 10}
 QUICK_LADDER: list[dict[str, Any]] = [
     {"name": "base8x10"},  # the default scene: 8x10, newmark dt 0.01
@@ -110,13 +154,8 @@ QUICK_LADDER: list[dict[str, Any]] = [
     {"name": "mesh12x16", "mesh.n_around": 12, "mesh.n_along": 16},
     {"name": "mesh16x20", "mesh.n_around": 16, "mesh.n_along": 20},  # dt error of the reference
     {"name": "static", "solver.integrator": "static"},
-    {
-        "name": "ref16x20_dt0.005",
-        "reference": True,
-        "mesh.n_around": 16,
-        "mesh.n_along": 20,
-        "solver.dt": 0.005,
-    },
+    QUICK_REF,
+    floor_rung(QUICK_REF),  # ref16x20_dt0.005_np2: the reference on 2 ranks (round-off floor)
 ]
 LO = 2.0  # deg: start of the compared range (skips the start-up transient of the motion)
 THRESHOLDS = (0.05, 0.02, 0.01)
@@ -124,17 +163,25 @@ NORMS = (("error", "raw"), ("error_smooth", f"{SMOOTH_DEG:g}-deg moving average"
 
 
 def rung_cases(base: dict[str, Any], ladder: list[dict[str, Any]]) -> tuple[list[Case], str]:
-    """(cases, name of the reference) of a ladder."""
+    """(cases, name of the reference) of a ladder. The reference is the rung marked
+    ``"reference"`` (else the last rung that is not a floor rung); ``"ranks"`` becomes
+    :attr:`Case.ranks`, ``"floor"`` a table column; neither is a ``--set``."""
     cases = []
-    ref = next((r["name"] for r in ladder if r.get("reference")), ladder[-1]["name"])
+    plain = [r for r in ladder if not r.get("floor")]
+    ref = next((r["name"] for r in ladder if r.get("reference")), (plain or ladder)[-1]["name"])
     for rung in ladder:
-        keys = {k: v for k, v in rung.items() if k not in ("name", "reference")}
+        if rung.get("floor") and rung["name"] == ref:
+            raise ValueError(f"rung {ref}: the reference cannot be a floor rung")
+        ranks = rung.get("ranks", 1)
+        keys = {k: v for k, v in rung.items() if k not in RUNG_KEYS}
         merged = {**base, **keys}
         if merged.get("solver.integrator") == "static":
             merged.pop("solver.dt", None)  # a Newmark-only key
         changed = "; ".join(f"{k}={v}" for k, v in keys.items()) or "base"
         params = {
             "reference": "yes" if rung["name"] == ref else "",
+            "floor": "yes" if rung.get("floor") else "",
+            "ranks": ranks,
             "settings": changed,
             "mesh": f"{merged.get('mesh.n_around', '?')}x{merged.get('mesh.n_along', '?')}",
             "order": merged.get("mesh.order", ""),
@@ -143,13 +190,16 @@ def rung_cases(base: dict[str, Any], ladder: list[dict[str, Any]]) -> tuple[list
             if merged.get("solver.integrator") != "static"
             else "",
         }
-        cases.append(Case(rung["name"], [set_arg(k, v) for k, v in merged.items()], params))
+        sets = [set_arg(k, v) for k, v in merged.items()]
+        cases.append(Case(rung["name"], sets, params, ranks=ranks))
     return cases, ref
 
 
 COLUMNS = [
     "case",
     "reference",
+    "floor",
+    "ranks",
     "settings",
     "mesh",
     "order",
@@ -171,6 +221,7 @@ COLUMNS = [
 MD_COLUMNS = [
     "case",
     "settings",
+    "ranks",
     "completed",
     "final_angle_deg",
     "error",
@@ -220,32 +271,92 @@ def add_errors(rows: list[dict], ref: str, study_dir: Path, angle: float) -> Non
         r["error_smooth"] = curve_error(*c_ref, *c, lo=lo, hi=angle, window=SMOOTH_DEG)
 
 
-def cheapest(rows: list[dict], ref: str) -> list[str]:
+def _is_floor(r: dict) -> bool:
+    return r.get("floor") == "yes"
+
+
+def round_off_floor(rows: list[dict]) -> dict[str, float]:
+    """The round-off floor F of each norm (``error``, ``error_smooth``): the error of the
+    floor rung against the reference (the largest, if several); nan if no floor rung has
+    that error (not run, no rows, stopped before A)."""
+    out = {}
+    for key, _ in NORMS:
+        vals = [r[key] for r in rows if _is_floor(r) and math.isfinite(r.get(key, math.nan))]
+        out[key] = max(vals) if vals else math.nan
+    return out
+
+
+def floor_line(rows: list[dict], floor: dict[str, float]) -> str:
+    """One line stating the round-off floor of both norms (or that it was not measured)."""
+    names = [r["case"] for r in rows if _is_floor(r)]
+    if not any(math.isfinite(floor.get(key, math.nan)) for key, _ in NORMS):
+        why = (
+            f"{', '.join(names)} has no error against the reference (not run, or stopped before A)"
+            if names
+            else "no floor rung"
+        )
+        return f"round-off floor: not measured ({why}); no threshold is flagged"
+    ranks = ", ".join(str(r.get("ranks", "?")) for r in rows if _is_floor(r))
+    parts = [
+        f"F = {100 * floor[key]:.2f} % ({norm})"
+        if math.isfinite(floor.get(key, math.nan))
+        else f"not measured ({norm})"
+        for key, norm in NORMS
+    ]
+    return (
+        f"round-off floor ({', '.join(names)}: the reference's settings on {ranks} MPI ranks,"
+        f" against the serial reference): {', '.join(parts)}; differences below F are not"
+        " resolved by the scene"
+    )
+
+
+def cheapest(rows: list[dict], ref: str, floor: dict[str, float] | None = None) -> list[str]:
     """For each threshold and each norm (raw, smoothed): the rung with the least wall time
-    whose error is within the threshold, as one line."""
+    whose error is within the threshold, as one line; neither the reference nor a floor rung
+    is a candidate. A threshold below that norm's round-off floor ``floor[key]`` (default:
+    :func:`round_off_floor` of ``rows``; nan = not measured, nothing flagged) is flagged."""
+    if floor is None:
+        floor = round_off_floor(rows)
     out = []
     for tol in THRESHOLDS:
         for key, norm in NORMS:
             ok = [
                 r
                 for r in rows
-                if r["case"] != ref and math.isfinite(r.get(key, math.nan)) and r[key] <= tol
+                if r["case"] != ref
+                and not _is_floor(r)
+                and math.isfinite(r.get(key, math.nan))
+                and r[key] <= tol
             ]
             head = f"within {100 * tol:g} % ({norm}): "
+            f = floor.get(key, math.nan)
+            flag = (
+                f" (below the round-off floor F = {100 * f:.2f} %: differences this small are"
+                " not resolved)"
+                if math.isfinite(f) and tol < f
+                else ""
+            )
             if ok:
                 best = min(
                     ok, key=lambda r: r["wall_s"] if math.isfinite(r["wall_s"]) else math.inf
                 )
                 out.append(
                     f"{head}{best['case']} ({best['settings']}), error "
-                    f"{100 * best[key]:.2f} %, {fmt(best['wall_s'])} s"
+                    f"{100 * best[key]:.2f} %, {fmt(best['wall_s'])} s{flag}"
                 )
             else:
-                out.append(head + "none of the rungs")
+                out.append(head + "none of the rungs" + flag)
     return out
 
 
-def plot(rows: list[dict], ref: str, angle: float, lo: float, png: Path) -> None:
+def plot(
+    rows: list[dict],
+    ref: str,
+    angle: float,
+    lo: float,
+    png: Path,
+    floor: dict[str, float] | None = None,
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -280,6 +391,16 @@ def plot(rows: list[dict], ref: str, angle: float, lo: float, png: Path) -> None
             )
     for tol in THRESHOLDS:
         ax.axhline(tol, color="0.6", lw=0.8, ls="--")
+    for key, _norm in NORMS:  # the round-off floors, in the colour of their norm's points
+        f = (floor or {}).get(key, math.nan)
+        if math.isfinite(f) and f > 0:
+            ax.axhline(
+                f,
+                color=styles[key]["color"],
+                lw=1.0,
+                ls="--",
+                label=f"round-off floor, {key}: {100 * f:.2f} %",
+            )
     ref_row = next((r for r in rows if r["case"] == ref), None)
     if ref_row is not None and math.isfinite(ref_row["wall_s"]):
         ax.axvline(ref_row["wall_s"], color="C3", lw=0.8, ls=":", label=f"reference {ref}")
@@ -342,15 +463,19 @@ def main(argv: list[str] | None = None) -> int:
         "",
         "",
     ]
-    verdict = cheapest(rows, ref)
+    floor = round_off_floor(rows)
+    floor_text = floor_line(rows, floor)
+    verdict = cheapest(rows, ref, floor)
     text = "\n".join(head) + markdown_table(rows, MD_COLUMNS) + "\n"
+    text += f"- {floor_text}\n"
     text += "".join(f"- cheapest {v}\n" for v in verdict)
     (out / "ladder.md").write_text(text)
-    plot(rows, ref, angle, lo, out / "ladder.png")
+    plot(rows, ref, angle, lo, out / "ladder.png", floor)
     if math.isfinite(angle):
         print(f"reference {ref}; compared over [{lo:g}, {angle:.4g}] deg")
     else:
         print(f"reference {ref} has no result (not run, or no rows): no errors")
+    print(floor_text)
     for v in verdict:
         print("cheapest " + v)
     print(f"written: {out / 'ladder.csv'}, {out / 'ladder.md'}, {out / 'ladder.png'}")
