@@ -259,7 +259,7 @@ class DynamicContact:
                     if h < dt_min:
                         raise ContactDivergence(
                             f"dynamic contact failed at t = {self.t:.6g} s with dt below "
-                            f"dt_min = {dt_min:.3g} s"
+                            f"dt_min = {dt_min:.3g} s (last failure: {exc})"
                         ) from exc
             # keep a cut step; double it again after `grow_after` steps without a cut
             self.streak = 0 if cut else self.streak + 1
