@@ -75,6 +75,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import NoReturn
 
 import dolfinx.fem.petsc as fem_petsc
 import numpy as np
@@ -680,6 +681,14 @@ class LagrangeContact:
         saved_u, saved_t = m.u.x.array.copy(), m.theta.x.array.copy()
         saved_active, saved_lam = self._act.copy(), self._lam.copy()
         saved_load = float(m.lam.value)
+
+        def fail(message: str) -> NoReturn:
+            self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
+            raise ContactDivergence(message)
+
+        def positions(xv: PETSc.Vec) -> FloatArray:
+            return self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
+
         m.set_load_factor(lam_load)
         bc_rows, bc_vals = m.bc_rows_and_values(lam_load)
         fixed = np.zeros(3 * n, dtype=int)
@@ -692,8 +701,7 @@ class LagrangeContact:
         active = self._act & can_touch  # (n, nb): node i against ellipsoid k
         # predictor: activate the nodes that the prescribed motions made penetrate (on their
         # most penetrated ellipsoid; see changes_of)
-        x0 = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
-        g0 = self._gaps(x0)
+        g0 = self._gaps(positions(xv))
         if n and self.nb:
             k0 = np.argmin(g0, axis=1)
             new = can_touch[:, 0] & ~active.any(axis=1) & (g0[np.arange(n), k0] < -self.gap_tol)
@@ -710,8 +718,7 @@ class LagrangeContact:
             number over all ranks."""
             lam_all = np.zeros(n * self.nb)
             lam_all[pairs] = lam_a
-            x = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
-            gap = np.where(released, np.inf, self._gaps(x))
+            gap = np.where(released, np.inf, self._gaps(positions(xv)))
             lam_max = self.comm.allreduce(
                 float(np.max(np.abs(lam_a))) if len(lam_a) else 0.0, op=MPI.MAX
             )
@@ -737,77 +744,73 @@ class LagrangeContact:
             add |= frozen & ~active
             return drop, add, self.comm.allreduce(int(drop.sum() + add.sum()), op=MPI.SUM)
 
-        while True:  # (a second round only after cycling pairs were released)
-            while True:
-                sets += 1
-                pairs = np.flatnonzero(active.ravel())
-                early = None
-                if p.semismooth_passes >= sets:  # the set may change inside Newton (semismooth)
-                    early = lambda xv, lam_a, pairs=pairs: changes_of(xv, pairs, lam_a)[2] > 0  # noqa: E731
-                ok, its, lam_a, fr = self._newton(
-                    xv, pairs, lam_pairs[pairs], bc_rows, bc_vals, set_changed=early
+        while True:
+            sets += 1
+            pairs = np.flatnonzero(active.ravel())
+            early = None
+            if p.semismooth_passes >= sets:  # the set may change inside Newton (semismooth)
+                early = lambda xv, lam_a, pairs=pairs: changes_of(xv, pairs, lam_a)[2] > 0  # noqa: E731
+            ok, its, lam_a, fr = self._newton(
+                xv, pairs, lam_pairs[pairs], bc_rows, bc_vals, set_changed=early
+            )
+            newton_total += its
+            if not ok:
+                fail(
+                    f"Newton failed at load factor {lam_load:.6g} in active-set pass {sets} "
+                    f"({len(pairs)} active node-ellipsoid pairs on rank {self.comm.rank})"
                 )
-                newton_total += its
-                if not ok:
-                    self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
-                    raise ContactDivergence(
-                        f"Newton failed at load factor {lam_load:.6g} in active-set pass {sets} "
-                        f"({len(pairs)} active node-ellipsoid pairs on rank {self.comm.rank})"
-                    )
-                lam_pairs[:] = 0.0
-                lam_pairs[pairs] = lam_a
-                drop, add, changes = changes_of(xv, pairs, lam_a)
-                if changes == 0:  # (an early exit always has changes: same test)
+            lam_pairs[:] = 0.0
+            lam_pairs[pairs] = lam_a
+            drop, add, changes = changes_of(xv, pairs, lam_a)
+            if changes == 0:  # (an early exit always has changes: same test)
+                # a kept pair that pulls by more than 1 % of the largest multiplier is let go
+                # for the rest of the step (once), and the passes go on without it; the step
+                # then stands if it penetrates by at most release_penetration (below)
+                if not self.comm.allreduce(bool(frozen.any()), op=MPI.LOR):  # on every rank
                     break
-                if sets >= p.max_active_set:
-                    self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
-                    raise ContactDivergence(
-                        f"active set still changing after {sets} passes at load factor "
-                        f"{lam_load:.6g} ({changes} changes)"
-                    )
-                active = (active & ~drop) | add
-                lam_pairs[drop.ravel()] = 0.0
-                # anti-cycling: a pair switched in or out 6 times in one step is kept active for
-                # the rest of the step (adhesion up to 1 % of the largest multiplier accepted)
-                flips += drop | add
-                frozen |= (flips >= 6) & ~released
-            # a kept pair that pulls by more than 1 % of the largest multiplier is let go for
-            # the rest of the step (once); the step then stands if it penetrates by at most
-            # release_penetration (checked below)
-            if not self.comm.allreduce(bool(frozen.any()), op=MPI.LOR):  # on every rank
-                break
-            lam_max = self.comm.allreduce(float(np.max(np.abs(lam_pairs), initial=0.0)), op=MPI.MAX)
-            lam_nb = lam_pairs.reshape(n, self.nb)
-            pulling = frozen & (lam_nb < -1e-2 * lam_max)
-            if not self.comm.allreduce(bool(pulling.any()), op=MPI.LOR):
-                break
-            pull = self.comm.allreduce(float(np.min(lam_nb[pulling], initial=0.0)), op=MPI.MIN)
-            if self.comm.allreduce(bool(released.any()), op=MPI.LOR):
-                self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
-                raise ContactDivergence(
-                    f"active set cycling at load factor {lam_load:.6g}: a pair kept active "
-                    f"pulls with {pull:.3g} N after cycling pairs were released"
+                lam_max = self.comm.allreduce(
+                    float(np.max(np.abs(lam_pairs), initial=0.0)), op=MPI.MAX
                 )
-            log.debug("active set cycling: releasing pairs that pull with up to %.3g N", pull)
-            released |= pulling
-            frozen &= ~pulling
-            active &= ~pulling
-            lam_pairs[pulling.ravel()] = 0.0
+                lam_nb = lam_pairs.reshape(n, self.nb)
+                pulling = frozen & (lam_nb < -1e-2 * lam_max)
+                if not self.comm.allreduce(bool(pulling.any()), op=MPI.LOR):
+                    break
+                pull = self.comm.allreduce(float(np.min(lam_nb[pulling], initial=0.0)), op=MPI.MIN)
+                if self.comm.allreduce(bool(released.any()), op=MPI.LOR):
+                    fail(
+                        f"active set cycling at load factor {lam_load:.6g}: a pair kept active "
+                        f"pulls with {pull:.3g} N after cycling pairs were released"
+                    )
+                log.debug("active set cycling: releasing pairs that pull with up to %.3g N", pull)
+                released |= pulling
+                frozen &= ~pulling
+                active &= ~pulling
+                lam_pairs[pulling.ravel()] = 0.0
+                continue
+            if sets >= p.max_active_set:
+                fail(
+                    f"active set still changing after {sets} passes at load factor "
+                    f"{lam_load:.6g} ({changes} changes)"
+                )
+            active = (active & ~drop) | add
+            lam_pairs[drop.ravel()] = 0.0
+            # anti-cycling: a pair switched in or out 6 times in one step is kept active for
+            # the rest of the step (adhesion up to 1 % of the largest multiplier accepted)
+            flips += drop | add
+            frozen |= (flips >= 6) & ~released
         if self.comm.allreduce(bool(released.any()), op=MPI.LOR):
-            x = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
             depth = self.comm.allreduce(
-                float(-np.min(self._gaps(x)[released], initial=np.inf)), op=MPI.MAX
+                float(-np.min(self._gaps(positions(xv))[released], initial=np.inf)), op=MPI.MAX
             )
             if depth > self.release_penetration:
-                self._restore(saved_u, saved_t, saved_active, saved_lam, saved_load)
-                raise ContactDivergence(
+                fail(
                     f"active set cycling at load factor {lam_load:.6g}: a released pair "
                     f"penetrates by {depth:.3g} m > release_penetration "
                     f"{self.release_penetration:.3g} m"
                 )
         # commit
         m.set_state(xv)
-        x = self.X + xv.getArray(readonly=True)[: 3 * n].reshape(-1, 3)
+        x = positions(xv)
         gap = self._gaps(x)
         self._act, self._lam = active, lam_pairs.reshape(n, self.nb)
         self.step_count += 1
