@@ -26,6 +26,7 @@ import json
 import math
 import os
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -40,6 +41,8 @@ import numpy as np
 
 from clothfem.report import curve_error, read_history
 from clothfem.report import torque_curve as report_torque_curve
+from clothfem.scene import SceneError
+from clothfem.scene import load as load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "demos" / "scenes" / "arm_sleeve.toml"
@@ -63,6 +66,7 @@ __all__ = [
     "case_result",
     "command",
     "curve_error",
+    "find_twin",
     "fmt",
     "markdown_table",
     "mesh_sets",
@@ -211,6 +215,67 @@ def _done_before(folder: Path, sets: list[str], ranks: int = 1) -> bool:
     return rec is not None and rec.get("returncode") == 0
 
 
+# sections of a scene that do not change the computed answer (names, output cadence)
+_NOT_PHYSICS = ("scene", "output")
+
+
+def _physics(scene_path: Path | str, sets: Sequence[str]) -> dict[str, Any] | None:
+    """The validated scene with overrides, without the sections that only name it or say
+    what to write (None if it does not load)."""
+    try:
+        data = load_scene(scene_path, list(sets))
+    except (SceneError, OSError):
+        return None
+    return {k: v for k, v in data.items() if k not in _NOT_PHYSICS}
+
+
+def _scene_of_command(path: Path) -> str | None:
+    """The scene file of a ``command.txt`` (the word after ``run``; case.json files written
+    before it recorded ``scene`` have only this)."""
+    try:
+        words = shlex.split(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return words[words.index("run") + 1] if "run" in words[:-1] else None
+
+
+def find_twin(folder: Path, scene: Path, sets: Sequence[str], ranks: int = 1) -> Path | None:
+    """A completed case folder of the same driver output (``folder/../../*/*``) that ran the
+    same physics: same ranks and, after overrides and defaults, the same scene but for its
+    name and output sections (e.g. friction's mu = 0.5 case and fit's R = 0.06 m case).
+    None if there is none."""
+    mine = _physics(scene, sets)
+    if mine is None:
+        return None
+    for rec_path in sorted(folder.parent.parent.glob("*/*/case.json")):
+        other = rec_path.parent
+        rec = _load_json(rec_path) or {}
+        if other.resolve() == folder.resolve() or "same_as" in rec:
+            continue  # itself, or a copy
+        their_sets = rec.get("sets")
+        their_ranks = rec.get("ranks", 1)
+        if their_sets is None or their_ranks != ranks or not _done_before(other, their_sets, ranks):
+            continue
+        their_scene = rec.get("scene") or _scene_of_command(other / "command.txt")
+        if their_scene is not None and _physics(their_scene, their_sets) == mine:
+            return other
+    return None
+
+
+def _copy_twin(twin: Path, folder: Path, sets: list[str], ranks: int) -> None:
+    """Make ``folder`` a result-only copy of ``twin`` (history, summary, PNGs; not the XDMF,
+    logs or checkpoint) whose case.json names the twin."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for f in [twin / "history.csv", twin / "summary.json", *twin.glob("*.png")]:
+        if f.is_file():
+            shutil.copy2(f, folder / f.name)
+    rec = _load_json(twin / "case.json") or {}
+    rec.update(sets=sets, same_as=str(twin))
+    if ranks > 1:
+        rec["ranks"] = ranks
+    (folder / "case.json").write_text(json.dumps(rec, indent=1) + "\n")
+
+
 def _run(cmd: list[str], folder: Path, timeout: float | None) -> tuple[int, float, bool]:
     """Run ``cmd`` in its own process group, logs to ``folder``; returns (exit status, wall
     time, timed out). On timeout or Ctrl-C the child gets SIGTERM (clothfem closes its files
@@ -276,11 +341,17 @@ def run_cases(
         cmd = command(case, folder, args.extra_set)
         sets = [*case.sets, *args.extra_set]
         skip = not args.force and _done_before(folder, sets, case.ranks)
+        twin = None if skip or args.force else find_twin(folder, case.scene, sets, case.ranks)
         if args.dry_run:
-            print(("# done, skipped: " if skip else "") + shlex.join(cmd))
+            prefix = "# done, skipped: " if skip else ""
+            prefix = f"# same physics as {twin}, copied: " if twin else prefix
+            print(prefix + shlex.join(cmd))
             continue
         if skip:
             print(f"[{study_dir.name}/{case.name}] completed before: skipped (--force reruns)")
+        elif twin is not None:
+            _copy_twin(twin, folder, sets, case.ranks)
+            print(f"[{study_dir.name}/{case.name}] same physics as {twin}: copied, not run")
         else:
             folder.mkdir(parents=True, exist_ok=True)
             # a case stopped by --timeout continues from its checkpoint (same overrides)
@@ -305,6 +376,7 @@ def run_cases(
             code, wall, timed_out = _run(cmd, folder, args.timeout)
             wall += float(before.get("wall_s", 0.0)) if resume else 0.0
             rec = {"sets": sets, "returncode": code, "wall_s": wall, "timed_out": timed_out}
+            rec["scene"] = str(case.scene)
             rec["resumed"] = bool(resume)
             if case.ranks > 1:
                 rec["ranks"] = case.ranks

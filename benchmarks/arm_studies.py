@@ -22,9 +22,15 @@ Studies (``--study``, default all):
 * ``thickness``: t = 1 vs 2 mm at mu = 0.5 -> ``thickness.png``; ``ratio_at_<a>deg`` =
   torque(t) / torque(1 mm) at 10..50 deg;
 * ``material``: sets I-III at mu = 0.1 (table MATERIALS below: E = 1.2 MPa / 350 MPa /
-  7.2 GPa, rho = 436 / 436 / 700; G12 = E/200 for II and III, while set I keeps the
-  paper's G = 0.1 MPa, as the scene's crimped-cotton preset) -> ``material.png`` (log y);
+  7.2 GPa, rho = 436 / 436 / 700; G12 = E/200 for all three, as the paper states, so set I
+  is softer in shear than the scene's crimped-cotton preset, G = 0.1 MPa) ->
+  ``material.png`` (log y);
   ``torque_per_E_at_<a>deg`` = torque / E1 [N m / Pa].
+
+A case whose physics a completed case of another study already ran (same scene after
+overrides and defaults, but for its name and output sections; e.g. friction's mu = 0.5, fit's
+R = 0.06 m and thickness's 1 mm cases) is copied from it, not run again (``case.json`` then
+names it under ``same_as``; ``--force`` runs it).
 
 Studies b-e use the mesh ``--mesh`` (default 16x20, ``--quick`` 8x10). ``--angle-max DEG``
 overrides the forearm's angle_max (and scales contact.increments to keep 1-degree
