@@ -47,6 +47,7 @@ __all__ = [
     "check_points",
     "closest_point_ellipsoid",
     "closest_point_union",
+    "closest_points",
     "gradient_projection",
     "implicit_value",
     "radial_projection",
@@ -269,7 +270,8 @@ def gradient_projection(x: ArrayLike, c: ArrayLike, Q: ArrayLike, r: ArrayLike) 
 # exact closest point (Eberly)
 # --------------------------------------------------------------------------------------------
 def _closest_positive_octant(z: FloatArray, r: FloatArray, tol: float, max_iter: int) -> FloatArray:
-    """Closest surface point of points ``z >= 0`` (N, 3) to ``sum (p_i/r_i)^2 = 1`` (r_max = 1).
+    """Closest surface point of points ``z >= 0`` (N, 3) to ``sum (p_i/r_i)^2 = 1``, each
+    point with its own radii ``r`` (N, 3) (scaled so that every row's largest radius is 1).
 
     Lagrange condition: ``p_i = r_i^2 z_i / (t + r_i^2)``, with ``t`` the largest root of
     ``F(t) = sum_i (r_i z_i / (t + r_i^2))^2 - 1`` -- the one with ``t > -r_min^2``, which is the
@@ -283,41 +285,45 @@ def _closest_positive_octant(z: FloatArray, r: FloatArray, tol: float, max_iter:
     ``s > 0``: then ``s = 0`` and the free shortest-axis coordinate follows from ``f(p) = 0``
     (Eberly's degenerate case; covers the centre, points on long axes, spheres, prolate and
     oblate shapes).
+
+    Every operation is elementwise per point (row), so a point gets the same bits whether it
+    is solved alone or batched with points of other ellipsoids.
     """
-    rmin = float(r.min())
-    delta = (r - rmin) * (r + rmin)
+    rmin = r.min(axis=1)
+    delta = (r - rmin[:, None]) * (r + rmin[:, None])
     on_min = delta == 0.0
     a = (r * z) ** 2  # (N, 3)
     p = np.empty_like(z)
 
     # degenerate case test
-    zmin_sum = z[:, on_min].sum(axis=1)
+    zmin_sum = np.where(on_min, z, 0.0).sum(axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         F0 = np.where(on_min, 0.0, a / np.where(on_min, 1.0, delta) ** 2).sum(axis=1) - 1.0
     degen = (zmin_sum == 0.0) & (F0 <= 0.0)
     if np.any(degen):
-        zd = z[degen]
-        pd = np.zeros_like(zd)
-        off = ~on_min
-        pd[:, off] = r[off] ** 2 * zd[:, off] / delta[off]
-        kmin = int(np.flatnonzero(on_min)[0])
-        pd[:, kmin] = rmin * np.sqrt(np.maximum(-F0[degen], 0.0))
+        off = ~on_min[degen]
+        rd = r[degen]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pd = np.where(off, rd**2 * z[degen] / np.where(off, delta[degen], 1.0), 0.0)
+        kmin = np.argmax(on_min[degen], axis=1)  # the first shortest axis
+        pd[np.arange(len(pd)), kmin] = rmin[degen] * np.sqrt(np.maximum(-F0[degen], 0.0))
         p[degen] = pd
 
     idx = np.flatnonzero(~degen)
     if idx.size:
         az = a[idx]
+        dl = delta[idx]
         rz = np.sqrt(az)  # r_i z_i
         norm_rz = np.sqrt(az.sum(axis=1))
         lo = np.maximum.reduce(
-            [np.zeros(idx.size), (rz - delta).max(axis=1), norm_rz - delta.max()]
+            [np.zeros(idx.size), (rz - dl).max(axis=1), norm_rz - dl.max(axis=1)]
         )
         hi = norm_rz.copy()
         s = np.where(lo > 0.0, lo, hi)
         active = np.arange(idx.size)
         for _ in range(int(max_iter)):
             sa = s[active]
-            d = sa[:, None] + delta
+            d = sa[:, None] + dl[active]
             q = az[active] / (d * d)
             u = q.sum(axis=1)
             up = (q / d).sum(axis=1)
@@ -334,7 +340,7 @@ def _closest_positive_octant(z: FloatArray, r: FloatArray, tol: float, max_iter:
             active = active[~done]
             if active.size == 0:
                 break
-        p[idx] = r**2 * z[idx] / (s[:, None] + delta)
+        p[idx] = r[idx] ** 2 * z[idx] / (s[:, None] + dl)
     # polish: put p exactly on the surface (moves p by O(residual) along the ray)
     p /= np.sqrt(np.sum((p / r) ** 2, axis=1))[:, None]
     return p
@@ -359,6 +365,7 @@ def closest_point_ellipsoid(
     a shortest axis, incl. the centre, axes, spheres, prolate/oblate shapes) is handled in closed
     form.  Vectorised over N; no NaN for finite input.  Where the closest point is not unique
     (centre, medial surface inside) one of the minimisers is returned, preferring ``+e_i``.
+    For several ellipsoids at once, :func:`closest_points` gives the same numbers.
 
     Parameters
     ----------
@@ -379,17 +386,60 @@ def closest_point_ellipsoid(
     """
     x = check_points(x)
     c, Q, r = check_ellipsoid(c, Q, r)
+    return closest_points([x], [(c, Q, r)], tol=tol, max_iter=max_iter)[0]
+
+
+def closest_points(
+    xs: Sequence[ArrayLike],
+    bodies: Sequence[EllipsoidData],
+    *,
+    tol: float = 1e-13,
+    max_iter: int = 100,
+) -> list[Projection]:
+    """:func:`closest_point_ellipsoid` of the points ``xs[k]`` (N_k, 3) on ellipsoid
+    ``bodies[k]`` for every k, with one root solve for all points (the per-call cost of the
+    iteration is paid once, not once per ellipsoid). The results are bit for bit those of
+    one :func:`closest_point_ellipsoid` call per ellipsoid.
+
+    Parameters
+    ----------
+    xs : sequence of (N_k, 3) arrays
+        Positions in m, one array per ellipsoid (N_k may be 0).
+    bodies : sequence of (c, Q, r)
+        The ellipsoids, as many as ``xs``.
+    tol, max_iter :
+        As in :func:`closest_point_ellipsoid`.
+
+    Returns
+    -------
+    list of Projection
+        One per ellipsoid, in the order of ``bodies``.
+    """
+    ells = _check_bodies(bodies)
+    if len(xs) != len(ells):
+        raise ValueError(f"xs must hold one point array per body ({len(ells)}), got {len(xs)}")
     _check_tol(tol, max_iter)
-    y = (x - c) @ Q
-    scale = float(r.max())
-    ys = y / scale
-    rs = r / scale
-    z = np.abs(ys)
-    z[z < _TINY] = 0.0
-    pz = _closest_positive_octant(z, rs, tol, max_iter)
-    sign = np.where(ys < 0.0, -1.0, 1.0)
-    pl = sign * pz * scale
-    return _finish_local(x, y, pl, c, Q, r)
+    xs = [check_points(x, name=f"xs[{k}]") for k, x in enumerate(xs)]
+    ys, zs, rss, signs, scales = [], [], [], [], []
+    for x, (c, Q, r) in zip(xs, ells, strict=True):
+        y = (x - c) @ Q
+        scale = float(r.max())
+        ys_ = y / scale
+        z = np.abs(ys_)
+        z[z < _TINY] = 0.0
+        ys.append(y)
+        zs.append(z)
+        rss.append(np.broadcast_to(r / scale, z.shape))
+        signs.append(np.where(ys_ < 0.0, -1.0, 1.0))
+        scales.append(scale)
+    pz = _closest_positive_octant(np.concatenate(zs), np.concatenate(rss), tol, max_iter)
+    out = []
+    start = 0
+    for x, y, sign, scale, (c, Q, r) in zip(xs, ys, signs, scales, ells, strict=True):
+        stop = start + len(y)
+        out.append(_finish_local(x, y, sign * pz[start:stop] * scale, c, Q, r))
+        start = stop
+    return out
 
 
 # --------------------------------------------------------------------------------------------

@@ -91,7 +91,7 @@ from .friction import coulomb_return_map
 from .geometry import (
     EllipsoidData,
     _check_bodies,
-    closest_point_ellipsoid,
+    closest_points,
 )
 from .kkt import BorderedMatrix
 
@@ -372,11 +372,11 @@ class LagrangeContact:
         nodes, body = pairs // self.nb, pairs % self.nb
         m = len(pairs)
         gap, nrm, point = np.zeros(m), np.zeros((m, 3)), np.zeros((m, 3))
-        for k, (c, Q, r) in enumerate(self.bodies):
-            sel = np.flatnonzero(body == k)
-            if sel.size:
-                pr = closest_point_ellipsoid(x[nodes[sel]], c, Q, r)
-                gap[sel], nrm[sel], point[sel] = pr.gap, pr.normal, pr.point
+        sels = [np.flatnonzero(body == k) for k in range(self.nb)]
+        for sel, pr in zip(
+            sels, closest_points([x[nodes[sel]] for sel in sels], self.bodies), strict=True
+        ):
+            gap[sel], nrm[sel], point[sel] = pr.gap, pr.normal, pr.point
         return nodes, body, gap, nrm, point
 
     def _gaps(self, x: FloatArray) -> FloatArray:
@@ -387,9 +387,9 @@ class LagrangeContact:
         if hit is not None and hit[0] == self._pose_version and np.array_equal(hit[1], x):
             return hit[2]
         out = np.zeros((len(x), self.nb))
-        for k, (c, Q, r) in enumerate(self.bodies):
-            if len(x):
-                out[:, k] = closest_point_ellipsoid(x, c, Q, r).gap
+        if len(x):
+            for k, pr in enumerate(closest_points([x] * self.nb, self.bodies)):
+                out[:, k] = pr.gap
         out.flags.writeable = False
         self._gap_cache = (self._pose_version, x.copy(), out)
         return out
@@ -1023,8 +1023,10 @@ class _FrictionState:
         if len(x) == 0:
             return
         xi = self.xi.reshape(len(x), self.nb, 3)
-        for k, (c, Q, r) in enumerate(bodies):
-            xi[:, k] = (closest_point_ellipsoid(x, c, Q, r).point - c) @ Q
+        for k, ((c, Q, _), pr) in enumerate(
+            zip(bodies, closest_points([x] * self.nb, bodies), strict=True)
+        ):
+            xi[:, k] = (pr.point - c) @ Q
         self.force_old[:] = force
         self._anchors = None
 
@@ -1041,11 +1043,10 @@ class _FrictionState:
         if self._anchors is not None and self._anchors[0] == key:
             return self._anchors[1]
         anchor = np.empty((len(pairs), 3))
-        for k, (c, Q, r) in enumerate(bodies):
-            sel = np.flatnonzero(body == k)
-            if sel.size:
-                moved = c + self.xi[pairs[sel]] @ Q.T
-                anchor[sel] = closest_point_ellipsoid(moved, c, Q, r).point
+        sels = [np.flatnonzero(body == k) for k in range(len(bodies))]
+        moved = [c + self.xi[pairs[sel]] @ Q.T for sel, (c, Q, _) in zip(sels, bodies, strict=True)]
+        for sel, pr in zip(sels, closest_points(moved, bodies), strict=True):
+            anchor[sel] = pr.point
         anchor.flags.writeable = False
         self._anchors = (key, anchor)
         return anchor
