@@ -454,8 +454,13 @@ def main(argv: list[str] | None = None) -> int:
         "",
         f"- reference: **{ref}** ({ref_row['settings'] if ref_row else 'not run'}), "
         f"BASE = {', '.join(f'{k}={v}' for k, v in base.items())}",
-        f"- compared over [{lo:g}, {angle:.4g}] deg (A = the smallest final angle of the"
-        " reference and the completed rungs), two relative L2 norms of |tau|(angle):",
+        f"- compared over [{lo:g}, {angle:.4g}] deg ("
+        + (
+            "A given by --angle"
+            if args.angle is not None
+            else "A = the smallest final angle of the reference and the completed rungs"
+        )
+        + "), two relative L2 norms of |tau|(angle):",
         "- error (raw): ||tau - tau_ref|| / ||tau_ref||, the curves pointwise, including the"
         " step-to-step dynamic oscillation",
         f"- error_smooth: the same of the curves' centred {SMOOTH_DEG:g}-deg moving averages"

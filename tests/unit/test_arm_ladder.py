@@ -253,6 +253,7 @@ def test_main_writes_floor_to_md_and_png(tmp_path, monkeypatch, capsys):
     printed = capsys.readouterr().out
     md = (out / "ladder.md").read_text()
     raw, smooth = analytic_floor()
+    assert f"compared over [{L.LO:g}, {HI:g}] deg (A given by --angle)" in md
     for text in (printed, md):
         assert f"F = {100 * raw:.2f} % (raw)" in text
         assert "within 2 % (raw): off1.5" in text
