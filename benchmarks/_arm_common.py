@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from clothfem.report import curve_error, read_history
+from clothfem.report import curve_error, moving_average, read_history
 from clothfem.report import torque_curve as report_torque_curve
 from clothfem.scene import SceneError
 from clothfem.scene import load as load_scene
@@ -48,6 +48,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "demos" / "scenes" / "arm_sleeve.toml"
 HINGE = "body.1"  # the forearm segment of arm_sleeve.toml ([[body]] index 1)
 REPORT_ANGLES = (10, 20, 30, 40, 50, 57)  # deg: torque columns of the study tables
+# deg: angle bands of the band-mean torque columns (mean of |tau| over the band: robust to
+# single-step spikes, which the pointwise columns and the peak are not)
+REPORT_BANDS = ((2, 15), (15, 30), (30, 45), (45, 57))
 # deg: window of the centred moving average of the smoothed curve errors (curve_error
 # window=...); it filters the step-to-step dynamic oscillation of the torque (a few deg)
 SMOOTH_DEG = 2.0
@@ -57,12 +60,14 @@ __all__ = [
     "ROOT",
     "SCENE",
     "REPORT_ANGLES",
+    "REPORT_BANDS",
     "SMOOTH_DEG",
     "Case",
     "RowWriter",
     "MPIRUN",
     "add_common_args",
     "angle_max_sets",
+    "band_mean",
     "case_result",
     "command",
     "curve_error",
@@ -439,6 +444,16 @@ def torque_curve(hist: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     return a[last], t[last]
 
 
+def band_mean(angle: np.ndarray, torque: np.ndarray, lo: float, hi: float) -> float:
+    """Mean of the piecewise-linear torque curve over [lo, hi] deg (the exact integral over
+    the band divided by its width: ``clothfem.report.moving_average`` of window hi - lo at
+    the band's middle); nan if the curve does not cover the band."""
+    if angle.size == 0 or np.nanmin(angle) > lo + 1e-9 or np.nanmax(angle) < hi - 1e-9:
+        return math.nan
+    mid = np.array([0.5 * (lo + hi)])
+    return float(moving_average(angle, torque, hi - lo, at=mid)[0])
+
+
 def case_result(folder: Path, angles: Sequence[float] = REPORT_ANGLES) -> dict[str, Any]:
     """One flat row for a case folder: from ``summary.json`` where it exists, else from
     ``history.csv`` and the exit status in ``case.json``."""
@@ -498,6 +513,8 @@ def case_result(folder: Path, angles: Sequence[float] = REPORT_ANGLES) -> dict[s
     for ang in angles:
         covered = a.size and a[0] - 1e-9 <= ang <= a[-1] + 1e-9
         row[f"torque_at_{ang:g}deg"] = float(np.interp(ang, a, t)) if covered else math.nan
+    for lo, hi in REPORT_BANDS:
+        row[f"mean_torque_{lo:g}_{hi:g}deg"] = band_mean(a, t, lo, hi)
     row["peak_torque"] = float(t.max()) if t.size else math.nan
     row["nan_in_output"] = "yes" if _nan_in_csv(hist_path) else "no"
     return row
@@ -550,6 +567,7 @@ def result_columns(angles: Sequence[float] = REPORT_ANGLES) -> list[str]:
         "exit_status",
         "final_angle_deg",
         *(f"torque_at_{a:g}deg" for a in angles),
+        *(f"mean_torque_{lo:g}_{hi:g}deg" for lo, hi in REPORT_BANDS),
         "peak_torque",
         "wall_s",
         "driver_wall_s",

@@ -1,5 +1,5 @@
 """benchmarks/_arm_common.py: a study case whose physics another study already ran is copied,
-not run again (``find_twin``).
+not run again (``find_twin``); the band-mean torque columns (``band_mean``).
 
 No simulation runs: synthetic case folders (case.json, summary.json, history.csv) in
 ``tmp_path`` (one per process, so this also runs under mpirun).
@@ -9,6 +9,9 @@ import json
 import sys
 from argparse import Namespace
 from pathlib import Path
+
+import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 
@@ -68,3 +71,13 @@ def test_run_cases_copies_the_twin_and_reports_its_row(tmp_path, capsys):
     # a copy is never itself offered as a twin (without the run it copied: no twin)
     (ran / "case.json").unlink()
     assert C.find_twin(tmp_path / "fit" / "R0.06", C.SCENE, [*MESH, "contact.mu=0.5"]) is None
+
+
+def test_band_mean_is_the_exact_mean_of_the_curve():
+    """Mean of |tau| over an angle band: for tau = a^2 sampled finely, the piecewise-linear
+    interpolant's mean over [lo, hi] tends to (hi^3 - lo^3) / (3 (hi - lo)); a linear curve
+    gives its midpoint value exactly; a band outside the curve is nan."""
+    a = np.linspace(0.0, 57.0, 5701)
+    assert C.band_mean(a, a**2, 15.0, 30.0) == pytest.approx((30**3 - 15**3) / 45.0, rel=1e-6)
+    assert C.band_mean(a, 0.1 + 0.002 * a, 2.0, 15.0) == pytest.approx(0.1 + 0.002 * 8.5)
+    assert np.isnan(C.band_mean(a[:3000], a[:3000], 45.0, 57.0))
