@@ -10,7 +10,10 @@ folder ``OUT/<study>/<case>/`` holds what ``clothfem run`` writes (``history.csv
 driver, the overrides, the ranks). A case whose ``summary.json`` says ``completed`` with the
 same overrides and ranks is not run again unless ``force`` (so an interrupted study resumes where it
 stopped); while ``clothfem run`` does not write ``summary.json`` yet, ``case.json`` with exit
-status 0 stands in for it.
+status 0 stands in for it. A case whose physics (the scene after overrides and defaults, but
+for its name and output sections) a completed case of another study in the same output
+folder already ran is copied from it (:func:`find_twin`; ``case.json`` names it under
+``same_as``) instead of being run again.
 
 :func:`case_result` reduces a case folder to one flat row (completed, reason, final angle,
 steps, cut-backs, max penetration, wall time, torques at given angles, peak torque, NaN/inf
