@@ -319,6 +319,13 @@ SCHEMA: dict[str, Section] = {
                 default=5,
                 lo=0,
             ),
+            "newton_stall_limit": Key(
+                "int",
+                "newmark: Newton gives up an active-set pass (the step is cut) after this many "
+                "iterations in a row with a line-search step below 1/16",
+                default=4,
+                lo=1,
+            ),
             "torque_segment": Key(
                 "str", "hinge segment whose joint is the Eq. 28 centre J (default: first hinge)"
             ),

@@ -530,6 +530,7 @@ def _run_dynamic(
             mu=c["mu"],
             tangential_penalty=c["tangential_penalty"],
             semismooth_passes=c["semismooth_passes"],
+            newton_stall_limit=c["newton_stall_limit"],
         ),
         beta=(gamma + 0.5) ** 2 / 4,
         gamma=gamma,

@@ -134,6 +134,8 @@ class LagrangeContactParameters:
         largest value in the active-set pass (in (0, 1)), with max|gap| <= 1e-3 gap_tolerance.
     newton_stol: ... or when ``max|du| <= newton_stol * L`` with L the mesh size (in (0, 1)).
     max_newton: Newton iterations per active-set pass (>= 1).
+    newton_stall_limit: Newton gives up a pass (and the caller cuts the step) after this many
+        iterations in a row whose line search took a step below 1/16 (>= 1).
     max_active_set: active-set passes per step (>= 1).
     semismooth_passes: in the first this many passes (>= 0) the active set is updated as soon
         as a Newton iterate penetrates or pulls (primal-dual active set / semismooth Newton:
@@ -156,6 +158,7 @@ class LagrangeContactParameters:
     newton_rtol: float = 1e-9
     newton_stol: float = 1e-11
     max_newton: int = 50
+    newton_stall_limit: int = 4
     max_active_set: int = 30
     semismooth_passes: int = 5
     release_penetration: float | None = None
@@ -177,7 +180,7 @@ class LagrangeContactParameters:
             v = getattr(self, name)
             if not (math.isfinite(v) and 0 < v < 1):
                 raise ValueError(f"{name} must be in (0, 1), got {v!r}")
-        for name in ("max_newton", "max_active_set"):
+        for name in ("max_newton", "newton_stall_limit", "max_active_set"):
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= 1):
                 raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
@@ -662,7 +665,7 @@ class LagrangeContact:
             )
             # give up early when the line search keeps stalling (the caller cuts the step)
             stalled = stalled + 1 if used < 1.0 / 16.0 else 0
-            if stalled >= 4:
+            if stalled >= p.newton_stall_limit:
                 return False, its + 1, lam, terms[3]
             # semismooth variant: leave as soon as the iterate says the set is wrong
             if set_changed is not None and set_changed(xv, lam):

@@ -71,6 +71,10 @@ def test_defaults_filled():
             "'mesh.n_around': must be a multiple of 4",
         ),
         (_with("solver.integrator", "euler"), "'solver.integrator': must be one of 'static'"),
+        (
+            _with("contact.newton_stall_limit", 0),
+            r"'contact.newton_stall_limit': must be an integer in \[1, inf\]",
+        ),
     ],
 )
 def test_bad_scenes_one_line_errors(data, message):

@@ -68,6 +68,7 @@ def _kkt_ok(rec, total: float) -> None:
         ({"newton_rtol": 0.0}, "newton_rtol"),
         ({"max_newton": 0}, "max_newton"),
         ({"max_active_set": 2.5}, "max_active_set"),
+        ({"newton_stall_limit": 0}, "newton_stall_limit"),
         ({"prefix": ""}, "prefix"),
     ],
 )
