@@ -323,7 +323,7 @@ SCHEMA: dict[str, Section] = {
                 "int",
                 "newmark: Newton gives up an active-set pass (the step is cut) after this many "
                 "iterations in a row with a line-search step below 1/16",
-                default=4,
+                default=12,
                 lo=1,
             ),
             "torque_segment": Key(

@@ -135,7 +135,9 @@ class LagrangeContactParameters:
     newton_stol: ... or when ``max|du| <= newton_stol * L`` with L the mesh size (in (0, 1)).
     max_newton: Newton iterations per active-set pass (>= 1).
     newton_stall_limit: Newton gives up a pass (and the caller cuts the step) after this many
-        iterations in a row whose line search took a step below 1/16 (>= 1).
+        iterations in a row whose line search took a step below 1/16 (>= 1). 12 since
+        2026-11-23 (was 4): Newton often recovers after 5-11 such iterations when newly
+        added pairs with friction are closed, and a cut-back costs more than the wait.
     max_active_set: active-set passes per step (>= 1).
     semismooth_passes: in the first this many passes (>= 0) the active set is updated as soon
         as a Newton iterate penetrates or pulls (primal-dual active set / semismooth Newton:
@@ -158,7 +160,7 @@ class LagrangeContactParameters:
     newton_rtol: float = 1e-9
     newton_stol: float = 1e-11
     max_newton: int = 50
-    newton_stall_limit: int = 4
+    newton_stall_limit: int = 12
     max_active_set: int = 30
     semismooth_passes: int = 5
     release_penetration: float | None = None
