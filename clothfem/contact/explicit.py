@@ -48,8 +48,8 @@ from clothfem.contact.geometry import (
     EllipsoidData,
     _check_bodies,
     check_points,
-    closest_point_ellipsoid,
     closest_point_union,
+    closest_points,
 )
 
 __all__ = ["FilmResult", "film_step"]
@@ -264,9 +264,8 @@ def film_step(
         moved = np.flatnonzero(np.any(dv_t != 0.0, axis=1))
         if moved.size:
             xm = xa[moved] + dt * dv_t[moved]
-            for k in np.unique(bk[moved]):
-                sel = bk[moved] == k
-                pk = closest_point_ellipsoid(xm[sel], *ells[k])
+            sels = [bk[moved] == k for k in range(len(ells))]
+            for sel, pk in zip(sels, closest_points([xm[s] for s in sels], ells), strict=True):
                 xm[sel] = pk.point + offset * pk.normal
             xa[moved] = xm
         x[a] = xa

@@ -478,7 +478,7 @@ def closest_point_union(
     inside_tol : float, optional
         Threshold on the dimensionless Eq. 26 value for ``inside_other``.
     tol, max_iter :
-        Passed to :func:`closest_point_ellipsoid`.
+        Passed to :func:`closest_points`.
 
     Returns
     -------
@@ -489,7 +489,7 @@ def closest_point_union(
     ells = _check_bodies(bodies)
     if not (np.isfinite(inside_tol) and inside_tol >= 0.0):
         raise ValueError(f"inside_tol must be finite and >= 0, got {inside_tol}")
-    projs = [closest_point_ellipsoid(x, *e, tol=tol, max_iter=max_iter) for e in ells]
+    projs = closest_points([x] * len(ells), ells, tol=tol, max_iter=max_iter)
     gaps = np.stack([pr.gap for pr in projs], axis=1)
     body = np.argmin(gaps, axis=1)
     rows = np.arange(x.shape[0])
