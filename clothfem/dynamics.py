@@ -44,9 +44,10 @@ for comparison.
 PETSc options (prefix ``dyn_`` by default, e.g. ``-dyn_snes_monitor``):
 ``snes_rtol`` (1e-9, relative to max(first residual, force scale of the step)),
 ``snes_atol`` (1e-30), ``snes_stol`` (1e-12), ``snes_max_it`` (15),
-``snes_linesearch_type`` (basic), ``ksp_type``/``pc_type``/``pc_factor_mat_solver_type``
-(preonly/lu/mumps), ``newton_floor_rtol`` (1e-7: accept a stagnating residual below this
-fraction of the force scale).
+``snes_linesearch_type`` (basic), the direct solve of
+:func:`clothfem.petsc_options.direct_lu` (MUMPS LU; redundant on more than one rank),
+``newton_floor_rtol`` (1e-7: accept a stagnating residual below this fraction of the force
+scale).
 
 Energy (each :class:`DynamicStep`): kinetic 1/2 v.M v, strain (the model's strain energy),
 external work W_ext (trapezoidal, of the loads and of the support reactions on prescribed
@@ -69,6 +70,7 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from .petsc_options import direct_lu, set_defaults
 from .shell import inertia, rotation
 from .shell.model import ShellModel
 from .static import SolverDivergence
@@ -679,9 +681,6 @@ _SNES_DEFAULTS = {
     "snes_stol": 1e-12,
     "snes_max_it": 15,
     "snes_error_if_not_converged": False,
-    "ksp_type": "preonly",
-    "pc_type": "lu",
-    "pc_factor_mat_solver_type": "mumps",
 }
 
 
@@ -703,9 +702,7 @@ class _ImplicitStepper:
         self.values = np.zeros(0)
         self.fscale = 0.0
         opts = PETSc.Options()
-        for key, value in _SNES_DEFAULTS.items():
-            if not opts.hasName(prefix + key):
-                opts.setValue(prefix + key, value)
+        set_defaults(prefix, {**_SNES_DEFAULTS, **direct_lu(system.comm)})
         self.floor_rtol = opts.getReal(prefix + "newton_floor_rtol", 1e-7)
         snes = PETSc.SNES().create(system.comm)
         snes.setOptionsPrefix(prefix)
@@ -838,9 +835,7 @@ def _initial_acceleration(system, x, v, lam, damping: Damping, K0, prefix: str) 
     ksp = PETSc.KSP().create(system.comm)
     ksp.setOptionsPrefix(prefix + "mass_")
     ksp.setOperators(M)
-    ksp.setType("preonly")
-    ksp.getPC().setType("lu")
-    ksp.getPC().setFactorSolverType("mumps")
+    set_defaults(prefix + "mass_", direct_lu(system.comm))
     ksp.setFromOptions()
     ksp.solve(rhs, a)
     ksp.destroy()
@@ -1006,9 +1001,7 @@ def integrate_ts_alpha2(
                 opts.setValue(prefix + key, value)
         elif not opts.hasName(prefix + key):
             opts.setValue(prefix + key, value)
-    for key, value in _SNES_DEFAULTS.items():
-        if not opts.hasName(prefix + key):
-            opts.setValue(prefix + key, value)
+    set_defaults(prefix, {**_SNES_DEFAULTS, **direct_lu(s.comm)})
     tmp, f_res = x.duplicate(), x.duplicate()
     J = s.jacobian(x)
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from petsc4py import PETSc
 
+from .petsc_options import direct_lu, set_defaults
 from .shell.model import ShellModel
 
 __all__ = ["LoadStepping", "StepRecord", "SolverDivergence", "NewtonSolver", "solve_static"]
@@ -103,13 +104,9 @@ class NewtonSolver:
             "snes_stol": 1e-10,  # |dx| <= stol |x|: round-off floor
             "snes_max_it": 25,
             "snes_error_if_not_converged": False,
-            "ksp_type": "preonly",  # direct solve
-            "pc_type": "lu",
-            "pc_factor_mat_solver_type": "mumps",
+            **direct_lu(model.comm),  # MUMPS LU (redundant on > 1 rank: repeatable)
         }
-        for key, value in defaults.items():
-            if not opts.hasName(prefix + key):
-                opts.setValue(prefix + key, value)
+        set_defaults(prefix, defaults)
         snes.setFunction(self._residual, self.f)
         snes.setJacobian(self._jacobian, self.K)
         snes.setFromOptions()

@@ -64,8 +64,9 @@ friction forces, contact force on the fabric and on the body, contact pressure
 ``lam / A_i`` with ``A_i`` lumped nodal areas of the current configuration (HRZ diagonal
 lumping), resultant, Eq. 28 torque, accumulated dissipation and KKT diagnostics.
 
-PETSc options: the linear solver has the prefix ``contact_lagrange_`` (default MUMPS LU);
-override with ``-contact_lagrange_pc_factor_mat_solver_type superlu_dist`` etc.
+PETSc options: the linear solver has the prefix ``contact_lagrange_`` (default MUMPS LU,
+redundant on more than one rank, :mod:`clothfem.petsc_options`); override with e.g.
+``-contact_lagrange_pc_type lu`` (MUMPS's distributed LU).
 """
 
 from __future__ import annotations
@@ -85,6 +86,7 @@ from mpi4py import MPI
 from numpy.typing import ArrayLike, NDArray
 from petsc4py import PETSc
 
+from ..petsc_options import direct_lu, set_defaults
 from ..shell.model import ShellModel
 from .forces import diagnostics, joint_torque
 from .friction import coulomb_return_map
@@ -439,15 +441,8 @@ class LagrangeContact:
         ksp = PETSc.KSP().create(self.comm)
         prefix = self.params.prefix
         ksp.setOptionsPrefix(prefix)
-        opts = PETSc.Options()
-        defaults = {
-            "ksp_type": "preonly",  # one direct solve per Newton iteration
-            "pc_type": "lu",  # the bordered matrix is indefinite (zero multiplier block)
-            "pc_factor_mat_solver_type": "mumps",  # parallel LU with pivoting (serial and MPI)
-        }
-        for key, value in defaults.items():
-            if not opts.hasName(prefix + key):
-                opts.setValue(prefix + key, value)
+        # the bordered matrix is indefinite (zero multiplier block): LU with pivoting
+        set_defaults(prefix, direct_lu(self.comm))
         ksp.setFromOptions()
         self.ksp = ksp
         self._ksp_sizes = None
