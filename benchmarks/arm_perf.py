@@ -11,7 +11,10 @@ per-row timers the runner writes to `history.csv` (rank 0's share):
 
 Speed-up = serial wall / 2-rank wall of the same command; since a different partition can
 change Newton's path (iterations, cut-backs), the table also gives the time per Newton
-iteration and its ratio. Writes `OUT/arm_perf.csv` and `OUT/arm_perf.md`.
+iteration and its ratio. The 2-rank run is made twice: with the default direct solve
+(redundant: every rank factors the gathered matrix, clothfem.petsc_options) and with
+MUMPS's distributed LU (``-contact_lagrange_pc_type lu``). Writes `OUT/arm_perf.csv` and
+`OUT/arm_perf.md`.
 
     .venv/bin/python benchmarks/arm_perf.py --out results/arm-perf [--meshes 8x10 16x20]
 """
@@ -30,7 +33,11 @@ SCENE = ROOT / "demos" / "scenes" / "arm_sleeve.toml"
 PARTS = ("t_assembly", "t_contact", "t_solve", "t_io")
 
 
-def run(out: Path, mesh: str, angle: float, ranks: int) -> dict:
+# the direct solve of the contact system on 2 ranks: the default, and MUMPS's distributed LU
+SOLVES = {"redundant": [], "distributed": ["-contact_lagrange_pc_type", "lu"]}
+
+
+def run(out: Path, mesh: str, angle: float, ranks: int, solve: str) -> dict:
     na, nl = mesh.split("x")
     sets = [
         f"mesh.n_around={na}",
@@ -42,6 +49,7 @@ def run(out: Path, mesh: str, angle: float, ranks: int) -> dict:
     ]
     cmd = [sys.executable, "-m", "clothfem.cli", "run", str(SCENE), "--out", str(out)]
     cmd += [a for s in sets for a in ("--set", s)]
+    cmd += SOLVES[solve]
     if ranks > 1:
         mpi = ["mpirun", "--allow-run-as-root", "--oversubscribe", "-n", str(ranks)]
         cmd = [*mpi, sys.executable, "-m", "mpi4py", *cmd[1:]]
@@ -50,7 +58,8 @@ def run(out: Path, mesh: str, angle: float, ranks: int) -> dict:
     res = subprocess.run(cmd, capture_output=True, text=True, env=env)
     h, s = read_history(out / "history.csv"), read_summary(out)
     wall = float(s.get("wall_time", h["elapsed"][-1]))
-    row = {"mesh": mesh, "ranks": ranks, "exit": res.returncode, "wall_s": wall}
+    row = {"mesh": mesh, "ranks": ranks, "solve": solve if ranks > 1 else "serial"}
+    row |= {"exit": res.returncode, "wall_s": wall}
     row["steps"] = len(h["time"])
     row["newton"] = int(h["newton_iterations"].sum())
     row["final_angle"] = float(h["angle_deg"][-1])
@@ -73,19 +82,21 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     for mesh in args.meshes:
-        for ranks in (1, 2):
-            r = run(out / f"{mesh}_np{ranks}", mesh, args.angle, ranks)
-            rows.append(r)
+        one = run(out / f"{mesh}_np1", mesh, args.angle, 1, "redundant")
+        rows.append(one)
+        for solve in SOLVES:
+            two = run(out / f"{mesh}_np2_{solve}", mesh, args.angle, 2, solve)
+            two["speedup"] = one["wall_s"] / two["wall_s"]
+            two["speedup_per_newton"] = one["ms_per_newton"] / two["ms_per_newton"]
+            rows.append(two)
+        for r in rows[-3:]:
             print({k: round(v, 3) if isinstance(v, float) else v for k, v in r.items()}, flush=True)
-        one, two = rows[-2], rows[-1]
-        two["speedup"] = one["wall_s"] / two["wall_s"]
-        two["speedup_per_newton"] = one["ms_per_newton"] / two["ms_per_newton"]
     keys = list(dict.fromkeys(k for r in rows for k in r))
     with open(out / "arm_perf.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
         w.writerows(rows)
-    cols = ["mesh", "ranks", "wall_s", "steps", "newton", "ms_per_newton", "assembly_pct"]
+    cols = ["mesh", "ranks", "solve", "wall_s", "steps", "newton", "ms_per_newton", "assembly_pct"]
     cols += ["contact_pct", "solve_pct", "io_pct", "other_pct", "speedup", "speedup_per_newton"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:

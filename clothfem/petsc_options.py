@@ -23,7 +23,7 @@ from collections.abc import Mapping
 from mpi4py import MPI
 from petsc4py import PETSc
 
-__all__ = ["direct_lu", "set_defaults"]
+__all__ = ["describe_direct_lu", "direct_lu", "set_defaults"]
 
 
 def direct_lu(comm: MPI.Comm) -> dict[str, str]:
@@ -38,6 +38,16 @@ def direct_lu(comm: MPI.Comm) -> dict[str, str]:
         options["redundant_pc_type"] = "lu"
         options["redundant_pc_factor_mat_solver_type"] = "mumps"  # sequential MUMPS per rank
     return options
+
+
+def describe_direct_lu(comm: MPI.Comm) -> str:
+    """One line for a run's log: the default direct solve on ``comm``."""
+    if comm.size == 1:
+        return "MUMPS LU"
+    return (
+        f"MUMPS LU, redundant (each of the {comm.size} ranks factors the gathered matrix: "
+        "repeatable; -<prefix>pc_type lu for MUMPS's distributed LU)"
+    )
 
 
 def set_defaults(prefix: str, defaults: Mapping[str, object]) -> None:

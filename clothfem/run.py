@@ -22,6 +22,7 @@ from mpi4py import MPI
 
 from . import mesh as meshes
 from .io import ResultWriter, rank0_print, snapshot_png
+from .petsc_options import describe_direct_lu
 from .scene import SceneError
 from .shell import (
     Clamp,
@@ -156,6 +157,7 @@ def build_model(
             else f"inertia: consistent mass, Newmark gamma {scene['solver']['gamma']:g}, "
             f"dt {scene['solver']['dt']:g} s"
         ),
+        f"linear solves: {describe_direct_lu(comm)}",
     ]
     if scene["body"]:
         from .scenes_arm import contact_log

@@ -6,6 +6,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from clothfem.contact.kkt import BorderedMatrix, bordered_dense
+from clothfem.petsc_options import direct_lu, set_defaults
 
 COMM = MPI.COMM_WORLD
 N_NODES = 12  # global; 5 unknowns per node
@@ -97,12 +98,10 @@ def test_bordered_matrix_matches_dense_twin(repeat_node: bool) -> None:
     assert np.array_equal(A.getValues(range(r0, r1), range(ncol)), expect[r0:r1])
     # the LU of the same matrix object follows new values (factorisation refreshed, the
     # symbolic analysis reused): solve, update, solve again, against NumPy
+    # with clothfem's direct solve (MUMPS LU; redundant on > 1 rank)
     ksp = PETSc.KSP().create(COMM)
     ksp.setOptionsPrefix("test_kkt_")
-    opts = PETSc.Options()
-    opts["test_kkt_ksp_type"] = "preonly"
-    opts["test_kkt_pc_type"] = "lu"
-    opts["test_kkt_pc_factor_mat_solver_type"] = "mumps"
+    set_defaults("test_kkt_", direct_lu(COMM))
     ksp.setFromOptions()
     rhs, sol = A.createVecs()
     rhs.set(1.0)
