@@ -1,7 +1,9 @@
 """Stiff and extreme cases of the sleeve (issue 3): implicit and explicit dynamics of a
 clamped fabric tube for fabric-like to film-like stiffness and for thin / thick fabrics.
 
-Run:  python benchmarks/stiff_cases.py --out results/stiff          (full table, 14-17 min)
+Run:  python benchmarks/stiff_cases.py --out results/stiff          (full table, <= 1 h:
+      each implicit run stops after --max-implicit-wall 180 s, each explicit one is not run
+      if projected past --max-explicit-wall 240 s; such a row says so in "completed")
       python benchmarks/stiff_cases.py --out results/stiff --quick  (2 cases, ~40 s)
 
 The sleeve: open tube R = 0.06 m, L = 0.5 m along +x, 16 x 16 quadratic quadrilaterals
@@ -157,12 +159,19 @@ def lowest_period(system: dy.ShellSystem, iterations: int = 40) -> float:
     return 2 * math.pi / math.sqrt(lam)
 
 
+class WallLimit(RuntimeError):
+    """An implicit run used up its wall-time budget (--max-implicit-wall)."""
+
+
 class Recorder:
     """on_step callback: the step records, the cuff-bottom deflection and the largest nodal
-    rotation |theta| (the director parametrisation is singular at |theta| = pi)."""
+    rotation |theta| (the director parametrisation is singular at |theta| = pi). With a
+    ``budget`` [s] it raises :class:`WallLimit` after the first step past the budget (rank 0's
+    clock, broadcast, so every rank stops at the same step)."""
 
-    def __init__(self, model: ShellModel) -> None:
+    def __init__(self, model: ShellModel, budget: float = math.inf) -> None:
         self.model, self.records, self.w, self.theta = model, [], [], []
+        self.deadline = time.perf_counter() + budget
 
     def __call__(self, rec: dy.DynamicStep) -> None:
         self.records.append(rec)
@@ -170,6 +179,8 @@ class Recorder:
         th = self.model.theta.x.array.reshape(-1, 2)
         loc = float(np.max(np.linalg.norm(th, axis=1))) if len(th) else 0.0
         self.theta.append(self.model.comm.allreduce(loc, op=MPI.MAX))
+        if self.model.comm.bcast(time.perf_counter() > self.deadline, root=0):
+            raise WallLimit(f"wall budget used up at t = {rec.time:.4g} s")
 
 
 FAILURES = (dy.DynamicsDivergence, FloatingPointError, np.linalg.LinAlgError)
@@ -202,15 +213,17 @@ def summarise(rec: Recorder) -> dict:
     return out
 
 
-def run_implicit(model, system, scheme, T1, t_end) -> dict:
+def run_implicit(model, system, scheme, T1, t_end, budget: float) -> dict:
     reset(model)
     dt = T1 / 40
     stepping = dy.TimeStepping(dt=dt, t_end=t_end, dt_max=T1 / 20, dt_min=dt / 1024)
-    rec = Recorder(model)
+    rec = Recorder(model, budget)
     t0 = time.perf_counter()
     status = "yes"
     try:
         dy.integrate_implicit(system, stepping=stepping, scheme=scheme, on_step=rec)
+    except WallLimit as exc:
+        status = f"no: {exc} ({budget:.0f} s, --max-implicit-wall)"
     except FAILURES as exc:
         status = f"no: {type(exc).__name__}: {exc}"
     wall = time.perf_counter() - t0
@@ -338,6 +351,12 @@ def main() -> int:
     parser.add_argument(
         "--max-explicit-wall", type=float, default=240.0, help="explicit wall budget [s]"
     )
+    parser.add_argument(
+        "--max-implicit-wall",
+        type=float,
+        default=180.0,
+        help="wall budget of one implicit run [s]; past it the run stops and says so",
+    )
     parser.add_argument("--probe-steps", type=int, default=200)
     parser.add_argument("--cases", nargs="*", help="labels to run (default: all)")
     parser.add_argument("--integrators", nargs="*", choices=INTEGRATORS)
@@ -387,10 +406,11 @@ def main() -> int:
             }
             try:
                 if name == "newmark":
-                    res = run_implicit(model, system, dy.ImplicitScheme.newmark(), T1, t_end)
+                    newmark = dy.ImplicitScheme.newmark()
+                    res = run_implicit(model, system, newmark, T1, t_end, args.max_implicit_wall)
                 elif name == "alpha0.8":
                     scheme = dy.ImplicitScheme.generalized_alpha(rho_inf=0.8)
-                    res = run_implicit(model, system, scheme, T1, t_end)
+                    res = run_implicit(model, system, scheme, T1, t_end, args.max_implicit_wall)
                 else:
                     res = _no_newton(run_explicit(model, system, stable, t_end, args))
             except Exception as exc:  # report and go on with the next run

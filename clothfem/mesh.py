@@ -6,10 +6,15 @@ values. gmsh runs on rank 0 only; dolfinx distributes the mesh over the communic
 
 Generated meshes are structured and consistently oriented (cell normals agree across
 facets); :func:`check_orientation` verifies that for user meshes.
+
+On more than one rank the cells are partitioned by :func:`rcm_partitioner`, not by
+dolfinx's default (PT-Scotch), which measured three different partitions of the same mesh
+in six runs on 2 ranks and so made parallel runs non-repeatable (docs/parallel.md).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,8 +23,59 @@ import dolfinx
 import numpy as np
 from dolfinx.io import gmshio
 from mpi4py import MPI
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-__all__ = ["SurfaceMesh", "strip", "cylinder", "cylinder_panel", "load_msh"]
+__all__ = ["SurfaceMesh", "strip", "cylinder", "cylinder_panel", "load_msh", "rcm_partitioner"]
+
+
+def rcm_partitioner(comm: MPI.Comm, nparts: int, graph, ghosting: bool):
+    """Deterministic graph partitioner (dolfinx 0.5 signature) for a mesh held on one rank.
+
+    ``graph`` is this rank's part of the cells' dual graph (global cell numbers, cells
+    sharing a facet); all cells must be on one rank, as gmsh meshes are before distribution.
+    The cells are ordered by reverse Cuthill-McKee (SciPy, deterministic) and cut into
+    ``nparts`` contiguous, equal chunks: on a sleeve the parts are bands across the tube.
+    Returns each cell's destination ranks, the owner first; with ``ghosting`` also the ranks
+    that hold a facet neighbour (for dolfinx's shared-facet ghost layer).
+    """
+    n = graph.num_nodes
+    total = comm.allreduce(n, op=MPI.SUM)
+    if n not in (0, total):
+        raise RuntimeError("rcm_partitioner: the cells must all be on one rank")
+    if n == 0:
+        return dolfinx.cpp.graph.AdjacencyList_int32(np.zeros(0, np.int32), np.zeros(1, np.int32))
+    nbr, offsets = np.asarray(graph.array, dtype=np.int64), np.asarray(graph.offsets)
+    rows = np.repeat(np.arange(n), np.diff(offsets))
+    dual = csr_matrix((np.ones(len(nbr), dtype=np.int8), (rows, nbr)), shape=(n, n))
+    order = reverse_cuthill_mckee(dual, symmetric_mode=True)
+    part = np.empty(n, dtype=np.int32)
+    for p, chunk in enumerate(np.array_split(order, nparts)):
+        part[chunk] = p
+    dests = [[int(part[c])] for c in range(n)]
+    if ghosting:
+        cut = part[rows] != part[nbr]
+        for c, q in sorted(set(zip(rows[cut].tolist(), part[nbr[cut]].tolist(), strict=True))):
+            dests[c].append(q)
+    data = np.array([q for d in dests for q in d], dtype=np.int32)
+    offs = np.concatenate([[0], np.cumsum([len(d) for d in dests])]).astype(np.int32)
+    return dolfinx.cpp.graph.AdjacencyList_int32(data, offs)
+
+
+def _model_to_mesh(model, comm: MPI.Comm):
+    """``gmshio.model_to_mesh`` (model on rank 0) with :func:`rcm_partitioner`.
+
+    dolfinx 0.5's ``model_to_mesh`` takes no partitioner; its module-level ``create_mesh``
+    is swapped for the duration of the call.
+    """
+    partitioner = dolfinx.mesh.create_cell_partitioner(rcm_partitioner)
+    create_mesh = gmshio.create_mesh
+    gmshio.create_mesh = functools.partial(create_mesh, partitioner=partitioner)
+    try:
+        mesh, _, facet_tags = gmshio.model_to_mesh(model, comm, 0, gdim=3)
+    finally:
+        gmshio.create_mesh = create_mesh
+    return mesh, facet_tags
 
 
 @dataclass(frozen=True)
@@ -87,7 +143,7 @@ def _gmsh_to_dolfinx(comm: MPI.Comm, build, *, order: int, cell: str) -> Surface
         gmsh.model.mesh.setOrder(order)
     names = comm.bcast(names, root=0)
     try:
-        mesh, _, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=3)
+        mesh, facet_tags = _model_to_mesh(gmsh.model, comm)
     finally:
         if comm.rank == 0:
             gmsh.finalize()
@@ -271,7 +327,7 @@ def load_msh(path: str | Path, comm: MPI.Comm = MPI.COMM_WORLD) -> SurfaceMesh:
             gmsh.finalize()
         raise ValueError(error)
     try:
-        mesh, _, facet_tags = gmshio.model_to_mesh(gmsh.model, comm, 0, gdim=3)
+        mesh, facet_tags = _model_to_mesh(gmsh.model, comm)
     finally:
         if comm.rank == 0:
             gmsh.finalize()

@@ -82,3 +82,32 @@ def test_load_user_msh(tmp_path):
         meshes.load_msh(bad, COMM)
     with pytest.raises(ValueError, match="does not exist"):
         meshes.load_msh(tmp_path / "nope.msh", COMM)
+
+
+def test_rcm_partitioner_chain_graph():
+    """A chain of 10 cells on one rank: 2 contiguous parts of 5, the two cells at the cut
+    ghosted on the other part; ranks without cells return an empty list."""
+    import dolfinx.cpp.graph as cgraph
+
+    self_comm = MPI.COMM_SELF
+    nbrs = [[1]] + [[i - 1, i + 1] for i in range(1, 9)] + [[8]]
+    data = np.array([j for row in nbrs for j in row], dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum([len(r) for r in nbrs])]).astype(np.int32)
+    graph = cgraph.AdjacencyList_int64(data, offsets)
+    dest = meshes.rcm_partitioner(self_comm, 2, graph, True)
+    owner = [dest.links(c)[0] for c in range(10)]
+    assert sorted(owner) == [0] * 5 + [1] * 5
+    # contiguous along the chain, whichever end RCM starts from
+    assert owner in ([0] * 5 + [1] * 5, [1] * 5 + [0] * 5)
+    ghosts = {c: list(dest.links(c)[1:]) for c in range(10) if len(dest.links(c)) > 1}
+    assert ghosts == {4: [owner[5]], 5: [owner[4]]}
+    plain = meshes.rcm_partitioner(self_comm, 2, graph, False)
+    assert all(len(plain.links(c)) == 1 for c in range(10))
+
+
+def test_partition_repeats():
+    """The same generated mesh twice: the same cells and nodes on each rank, bit for bit."""
+    a = meshes.cylinder(COMM, radius=0.06, length=0.5, n_around=16, n_along=20).mesh
+    b = meshes.cylinder(COMM, radius=0.06, length=0.5, n_around=16, n_along=20).mesh
+    assert np.array_equal(a.geometry.x, b.geometry.x)
+    assert np.array_equal(a.geometry.dofmap.array, b.geometry.dofmap.array)
