@@ -8,12 +8,12 @@ The direct solver (:func:`direct_lu`) is MUMPS LU. In serial the matrix is facto
 On more than one rank it is factored **redundantly** (PCREDUNDANT: every rank gathers the whole
 matrix and factors it with sequential MUMPS). MUMPS's distributed factorisation hands work to
 processes by dynamic scheduling, so its round-off differs from run to run; for frictional
-contact that changed the Newton and active-set path, and sometimes the equilibrium found (the
-2-rank CI arm-sleeve scene: 3 runs, 3 different histories; redundant: 3 runs, identical bits;
-docs/parallel.md). Redundant factorisation repeats bit for bit, and at garment sizes (a few
-thousand unknowns) it is cheaper than the distributed one's communication. When the factor no
-longer fits on one rank, ``-<prefix>pc_type lu`` restores MUMPS's distributed LU (the same
-answers up to round-off, not repeatable run to run).
+contact that changes the Newton and active-set path (16x20 sleeve, 5 degrees, 2 ranks: 4
+runs, 4 different histories; redundant: 4 runs, identical bits; docs/parallel.md).
+Redundant factorisation repeats bit for bit, at the price of the solve's parallel speed-up
+(``make bench-arm`` measures both). When the factor no longer fits on one rank, or speed
+matters more, ``-<prefix>pc_type lu`` restores MUMPS's distributed LU (the same answers up
+to round-off, not repeatable run to run).
 """
 
 from __future__ import annotations
