@@ -29,7 +29,9 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 __all__ = ["SurfaceMesh", "strip", "cylinder", "cylinder_panel", "load_msh", "rcm_partitioner"]
 
 
-def rcm_partitioner(comm: MPI.Comm, nparts: int, graph, ghosting: bool):
+def rcm_partitioner(
+    comm: MPI.Comm, nparts: int, graph: dolfinx.cpp.graph.AdjacencyList_int64, ghosting: bool
+) -> dolfinx.cpp.graph.AdjacencyList_int32:
     """Deterministic graph partitioner (dolfinx 0.5 signature) for a mesh held on one rank.
 
     ``graph`` is this rank's part of the cells' dual graph (global cell numbers, cells
@@ -62,7 +64,7 @@ def rcm_partitioner(comm: MPI.Comm, nparts: int, graph, ghosting: bool):
     return dolfinx.cpp.graph.AdjacencyList_int32(data, offs)
 
 
-def _model_to_mesh(model, comm: MPI.Comm):
+def _model_to_mesh(model, comm: MPI.Comm) -> tuple[dolfinx.mesh.Mesh, dolfinx.mesh.MeshTags]:
     """``gmshio.model_to_mesh`` (model on rank 0) with :func:`rcm_partitioner`.
 
     dolfinx 0.5's ``model_to_mesh`` takes no partitioner; its module-level ``create_mesh``
