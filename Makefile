@@ -74,7 +74,7 @@ bench: bench-blas
 bench-blas: env
 	$(PY) benchmarks/blas.py
 
-## make bench-stiff: the stiff/extreme sleeve cases of docs/stiff_cases.md (~15 min)
+## make bench-stiff: the stiff/extreme sleeve cases of docs/stiff_cases.md (~50 min: 180-s cap per implicit run)
 bench-stiff: env
 	$(PY) benchmarks/stiff_cases.py --out $(OUT)/stiff
 
