@@ -987,21 +987,12 @@ def integrate_ts_alpha2(
     lam0 = lam_of(0.0)
     a = _initial_acceleration(s, x, v, lam0, Damping(), None, prefix)
     opts = PETSc.Options()
-    petsc = {
-        "ts_alpha_alpha_m": 1.0 - scheme.alpha_m,
-        "ts_alpha_alpha_f": 1.0 - scheme.alpha_f,
-        "ts_alpha_gamma": scheme.gamma,
-        "ts_alpha_beta": scheme.beta,
-        "ts_adapt_type": "none",
-    }
-    user_radius = opts.hasName(prefix + "ts_alpha_radius")
-    for key, value in petsc.items():
-        if key.startswith("ts_alpha_"):  # the scheme argument, unless a radius was given
-            if not user_radius:
-                opts.setValue(prefix + key, value)
-        elif not opts.hasName(prefix + key):
-            opts.setValue(prefix + key, value)
-    set_defaults(prefix, {**_SNES_DEFAULTS, **direct_lu(s.comm)})
+    if not opts.hasName(prefix + "ts_alpha_radius"):  # the scheme argument, unless a radius
+        opts.setValue(prefix + "ts_alpha_alpha_m", 1.0 - scheme.alpha_m)
+        opts.setValue(prefix + "ts_alpha_alpha_f", 1.0 - scheme.alpha_f)
+        opts.setValue(prefix + "ts_alpha_gamma", scheme.gamma)
+        opts.setValue(prefix + "ts_alpha_beta", scheme.beta)
+    set_defaults(prefix, {"ts_adapt_type": "none", **_SNES_DEFAULTS, **direct_lu(s.comm)})
     tmp, f_res = x.duplicate(), x.duplicate()
     J = s.jacobian(x)
 

@@ -264,7 +264,8 @@ def film_step(
         moved = np.flatnonzero(np.any(dv_t != 0.0, axis=1))
         if moved.size:
             xm = xa[moved] + dt * dv_t[moved]
-            sels = [bk[moved] == k for k in range(len(ells))]
+            bm = bk[moved]
+            sels = [bm == k for k in range(len(ells))]
             for sel, pk in zip(sels, closest_points([xm[s] for s in sels], ells), strict=True):
                 xm[sel] = pk.point + offset * pk.normal
             xa[moved] = xm
