@@ -361,6 +361,10 @@ def main() -> int:
     parser.add_argument("--cases", nargs="*", help="labels to run (default: all)")
     parser.add_argument("--integrators", nargs="*", choices=INTEGRATORS)
     args = parser.parse_args()
+    if not args.max_implicit_wall > 0:
+        parser.error(
+            f"--max-implicit-wall: must be a number of seconds > 0, got {args.max_implicit_wall}"
+        )
     if args.max_steps is None:
         args.max_steps = 2000 if args.quick else 20000
     logging.basicConfig(level=logging.WARNING, format="%(name)s: %(message)s")
