@@ -1150,12 +1150,12 @@ def integrate_explicit(
 
     ``contact``: a :class:`clothfem.contact.film.FilmContact`; the contact-free predictor is
     corrected by forward-increment Lagrange multipliers (Eqs. 22-25) before the forces are
-    evaluated, and nodes in contact take the post-impact velocity. Contact impulses appear in
-    the records' numerical dissipation.
+    evaluated, and the corrected nodes' half-step velocity becomes the post-impact velocity.
+    Contact impulses appear in the records' numerical dissipation.
 
     ``dt`` [s] defaults to ``safety * dt_crit`` of :func:`stable_time_step` at t = 0 (or of
     ``stable`` if given). ``check``: "error" raises ValueError when dt > dt_crit, "warn"
-    warns, "off" skips the check. Damping uses the predicted velocity v_n + dt a_n (explicit).
+    warns, "off" skips the check. Damping uses the predicted velocity v_n+1/2 + dt/2 a_n (explicit; = v_n + dt a_n without contact).
     Prescribed rows follow their values; their velocity is the difference quotient.
     Returns (records, the stability estimate used).
     """
@@ -1237,25 +1237,26 @@ def integrate_explicit(
         t = step * h
         lam = lam_of(t)
         x.copy(xo)
-        x.axpy(h, v)
-        x.axpy(0.5 * h * h, a)
+        v.axpy(0.5 * h, a)  # v: the half-step velocity v_n+1/2 (leapfrog form of the update)
+        x.axpy(h, v)  # x + h v_n + h^2/2 a_n: the contact-free predictor (Eq. 23)
         rows, values = s.bc(lam)
         if len(rows):
             xa = x.getArray()
             xa[rows] = values
-        v.copy(vp)
-        vp.axpy(h, a)
         if contact is not None:
-            contact.correct_positions(x, vp, t, h, rows)
+            # FILM on the predictor; the corrected nodes' half-step velocity becomes the
+            # post-impact one. Correcting the full-step velocity instead (v_n + h a_n) made the
+            # tangential update explicit Euler, whose energy grows by 1 + (h omega)^2 / 2 a step
+            contact.correct_positions(x, v, t, h, rows)
+            contact.correct_velocities(v)
+        v.copy(vp)
+        vp.axpy(0.5 * h, a)  # predicted v_n+1 for the damping forces
         a_new = a.duplicate()
         accel(x, vp, lam, a_new)
-        v.axpy(0.5 * h, a)
         v.axpy(0.5 * h, a_new)
         if len(rows):
             va = v.getArray()
             va[rows] = (x.getArray(readonly=True)[rows] - xo.getArray(readonly=True)[rows]) / h
-        if contact is not None:
-            contact.correct_velocities(v)
         a_new.copy(a)
         a_new.destroy()
         s.commit(x)  # (free for the shell: accel() left its state at x)

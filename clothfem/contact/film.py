@@ -5,9 +5,11 @@ the fabric positions without contact (Eq. 23); the multipliers that make the pre
 admissible follow from Eq. 25. With a lumped mass and each fabric node constrained by one
 rigid ellipsoid, ``G M^-1 G^T`` is diagonal and Eq. 25 decouples per node: the corrected node
 is the exact closest point on the body surface and ``lambda = m (x - x*) / dt^2``
-(:func:`clothfem.contact.explicit.film_step`). After the step, a node in contact takes the
-velocity of the body surface point (the paper's non-resilient impact), or a Coulomb-limited
-change of it when ``mu`` is given.
+(:func:`clothfem.contact.explicit.film_step`). A corrected node's half-step velocity
+``v_n+1/2`` (the predictor's chord velocity, leapfrog form of the central difference) becomes
+the velocity of the body surface point (the paper's non-resilient impact), or a
+Coulomb-limited change of it when ``mu`` is given; ``v_n+1 = v_n+1/2 + dt/2 a_n+1`` as for
+every node, so the position and velocity updates stay one symplectic scheme.
 
 :class:`FilmContact` connects that NumPy step to :func:`clothfem.dynamics.integrate_explicit`:
 it reads and corrects the translational unknowns of the owned nodes (rotations are not
@@ -133,7 +135,7 @@ class FilmContact:
         )
 
     def correct_velocities(self, v: PETSc.Vec) -> None:
-        """Post-impact velocities of the nodes corrected in this step (in place)."""
+        """Post-impact half-step velocities of the nodes corrected in this step (in place)."""
         if self.last is None:
             return
         n = self.n
@@ -150,8 +152,9 @@ class FilmContact:
 
     def torque(self, joint, *, nodes=None) -> np.ndarray:
         """Eq. 28 about ``joint`` [m] over ``nodes`` (mask/indices of owned nodes, or a
-        function of the reference coordinates (n, 3) -> mask), reduced over ranks [N m]."""
+        function of the reference coordinates, shape (3, n), -> mask, as for
+        :meth:`clothfem.contact.lagrange.LagrangeContact.torque`), reduced over ranks [N m]."""
         u = self.model.u.x.array[: 3 * self.n].reshape(self.n, 3)
-        sel = nodes(self.X) if callable(nodes) else nodes
+        sel = np.asarray(nodes(self.X.T.copy()), dtype=bool) if callable(nodes) else nodes
         tau = joint_torque(self.X + u, self.forces_on_body(), np.asarray(joint, float), nodes=sel)
         return self.comm.allreduce(np.asarray(tau), op=MPI.SUM)
