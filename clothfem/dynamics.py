@@ -1155,7 +1155,8 @@ def integrate_explicit(
 
     ``dt`` [s] defaults to ``safety * dt_crit`` of :func:`stable_time_step` at t = 0 (or of
     ``stable`` if given). ``check``: "error" raises ValueError when dt > dt_crit, "warn"
-    warns, "off" skips the check. Damping uses the predicted velocity v_n+1/2 + dt/2 a_n (explicit; = v_n + dt a_n without contact).
+    warns, "off" skips the check. Damping uses the predicted velocity v_n+1/2 + dt/2 a_n
+    (explicit; = v_n + dt a_n without contact).
     Prescribed rows follow their values; their velocity is the difference quotient.
     Returns (records, the stability estimate used).
     """
