@@ -151,13 +151,12 @@ def build_model(
         "supports: "
         + (", ".join(f"{s['type']} on {s['where']}" for s in scene["supports"]) or "none"),
         "loads: " + (", ".join(ld["type"] for ld in scene["loads"]) or "none"),
+        _inertia_log(scene["solver"]),
         (
-            "inertia: not built (static integrator)"
-            if scene["solver"]["integrator"] == "static"
-            else f"inertia: consistent mass, Newmark gamma {scene['solver']['gamma']:g}, "
-            f"dt {scene['solver']['dt']:g} s"
+            "linear solves: none (explicit: lumped mass)"
+            if scene["solver"]["integrator"] == "explicit"
+            else f"linear solves: {describe_direct_lu(comm)}"
         ),
-        f"linear solves: {describe_direct_lu(comm)}",
     ]
     if scene["body"]:
         from .scenes_arm import contact_log
@@ -166,6 +165,20 @@ def build_model(
     else:
         log += ["contact: not built (no body in the scene)", "friction: not built (no contact)"]
     return model, log
+
+
+def _inertia_log(sv: dict[str, Any]) -> str:
+    if sv["integrator"] == "static":
+        return "inertia: not built (static integrator)"
+    if sv["integrator"] == "explicit":
+        return (
+            f"inertia: lumped mass, central difference, dt = {sv['safety']:g} x dt_crit, "
+            f"rotary inertia x {sv['rotary_scale']:g}"
+        )
+    return (
+        f"inertia: consistent mass, Newmark gamma {sv['gamma']:g}, dt {sv['dt']:g} s, "
+        f"rotary inertia x {sv['rotary_scale']:g}"
+    )
 
 
 def _write_summary(out: Path, summary: dict[str, Any], comm: MPI.Comm) -> None:
@@ -195,10 +208,13 @@ def run_scene(
         )
     if scene["solver"]["integrator"] != "static" and scene["material"]["rho"] <= 0:
         raise SceneError(
-            "scene key 'material.rho': the newmark integrator needs a density > 0 kg/m^3"
+            f"scene key 'material.rho': the {scene['solver']['integrator']} integrator needs a "
+            "density > 0 kg/m^3"
         )
-    if resume and scene["solver"]["integrator"] == "static":
-        raise SceneError("--resume needs solver.integrator = 'newmark' (checkpoints)")
+    if resume and scene["solver"]["integrator"] != "newmark":
+        raise SceneError(
+            "--resume needs solver.integrator = 'newmark' (only newmark runs write checkpoints)"
+        )
     t0 = time.perf_counter()
     model, log = build_model(scene, comm)
     rank0_print(f"scene {scene['scene']['name']!r}")

@@ -209,9 +209,20 @@ SCHEMA: dict[str, Section] = {
         {
             "integrator": Key(
                 "choice",
-                "time integration",
+                "time integration: 'static' (a sequence of equilibria), 'newmark' (implicit, "
+                "Lagrange-multiplier contact), 'explicit' (central difference with the lumped "
+                "mass, forward-increment Lagrange-multiplier contact)",
                 default="static",
-                choices=("static", "newmark"),
+                choices=("static", "newmark", "explicit"),
+            ),
+            "safety": Key(
+                "float",
+                "explicit: time step = safety x the stable step dt_crit of the central "
+                "difference at t = 0 (power iteration)",
+                default=0.9,
+                lo=0.0,
+                hi=1.0,
+                open_lo=True,
             ),
             "steps": Key("int", "static: initial number of load steps", default=10, lo=1),
             "min_increment": Key("float", "static: smallest load increment", default=1e-4, **POS),
@@ -242,20 +253,21 @@ SCHEMA: dict[str, Section] = {
             ),
             "rotary_scale": Key(
                 "float",
-                "newmark: factor >= 1 on the rotary inertia rho t^3/12 of the director (mass "
-                "scaling; 1 = physical)",
+                "newmark, explicit: factor >= 1 on the rotary inertia rho t^3/12 of the "
+                "director (mass scaling; 1 = physical)",
                 default=1.0,
                 lo=1.0,
             ),
             "settle_time": Key(
                 "float",
-                "newmark: time [s] with the body at rest before the motion starts (settling)",
+                "newmark, explicit: time [s] with the body at rest before the motion starts "
+                "(settling)",
                 default=0.2,
                 lo=0.0,
             ),
             "ramp_time": Key(
                 "float",
-                "newmark: time [s] over which the loads (gravity) ramp up",
+                "newmark, explicit: time [s] over which the loads (gravity) ramp up",
                 default=0.1,
                 lo=0.0,
             ),
@@ -295,9 +307,10 @@ SCHEMA: dict[str, Section] = {
         {
             "method": Key(
                 "choice",
-                "implicit Lagrange multipliers with an active set (Sec. 3.2)",
-                default="lagrange",
-                choices=("lagrange",),
+                "'lagrange': implicit Lagrange multipliers with an active set (Sec. 3.2; static "
+                "and newmark); 'film': forward-increment Lagrange multipliers (Eqs. 22-25; "
+                "explicit). Default: the one of solver.integrator",
+                choices=("lagrange", "film"),
             ),
             "mu": Key(
                 "float",
@@ -363,13 +376,26 @@ SCHEMA: dict[str, Section] = {
     ),
     "output": Section(
         {
-            "every": Key("int", "write fields every N accepted steps", default=1, lo=1),
+            "every": Key(
+                "int",
+                "write fields every N accepted steps (explicit: every N history rows)",
+                default=1,
+                lo=1,
+            ),
             "png": Key("bool", "write PNG snapshots", default=True),
             "checkpoint_every": Key(
                 "int",
                 "newmark: write a restart checkpoint every N accepted steps (0 = never)",
                 default=10,
                 lo=0,
+            ),
+            "interval": Key(
+                "float",
+                "explicit: one history row per interval [s]; its torque, resultant and "
+                "multiplier sum are the means over the steps in it",
+                default=0.01,
+                lo=0.0,
+                open_lo=True,
             ),
         },
         "what is written",
@@ -501,6 +527,15 @@ def _validate_body(data: dict[str, Any], out: dict[str, Any]) -> None:
     if not body:
         return
     c = out["contact"]
+    film = out["solver"]["integrator"] == "explicit"
+    if c["method"] is None:
+        c["method"] = "film" if film else "lagrange"
+    elif (c["method"] == "film") != film:
+        _fail(
+            "contact.method",
+            f"must be {'film' if film else 'lagrange'!r} with solver.integrator = "
+            f"{out['solver']['integrator']!r}, got {c['method']!r}",
+        )
     hinges = [seg["name"] for seg in body if seg["type"] == "hinge"]
     if c["torque_segment"] is not None and c["torque_segment"] not in hinges:
         _fail(

@@ -110,18 +110,28 @@ def contact_log(scene: dict[str, Any]) -> list[str]:
     k = _torque_segment(scene)
     J = torque_centre(scene)
     aj = c["aj"] if c["aj"] == "all" else f"{c['aj']} of {scene['body'][k]['name']}"
-    return [
-        f"body: {len(segs)} rigid ellipsoid(s): " + "; ".join(segs),
-        f"contact: {c['method']} (implicit Lagrange multipliers, active set), "
-        + (
+    integrator = scene["solver"]["integrator"]
+    if integrator == "static":
+        how = (
             f"quasi-static, settle {'on' if c['settle'] else 'off'}, {c['increments']} motion "
             "increments, "
-            if scene["solver"]["integrator"] == "static"
-            else f"dynamic (Newmark), settling {scene['solver']['settle_time']:g} s, "
         )
+    else:
+        how = f"dynamic ({integrator}), settling {scene['solver']['settle_time']:g} s, "
+    film = c["method"] == "film"
+    return [
+        f"body: {len(segs)} rigid ellipsoid(s): " + "; ".join(segs),
+        f"contact: {c['method']} "
+        + (
+            "(forward-increment Lagrange multipliers, non-resilient), "
+            if film
+            else "(implicit Lagrange multipliers, active set), "
+        )
+        + how
         + f"torque about J = {J.tolist()} m over AJ = {aj}",
         (
-            f"friction: Coulomb mu {c['mu']:g} (regularised return map)"
+            f"friction: Coulomb mu {c['mu']:g} "
+            + ("(limits each step's tangential impulse)" if film else "(regularised return map)")
             if c["mu"] > 0
             else "friction: not built (mu = 0)"
         ),
@@ -243,11 +253,12 @@ def _torque_columns(tau: np.ndarray, res: np.ndarray, hinge_axis: np.ndarray) ->
     }
 
 
-def _ellipsoid_meshes(contact: LagrangeContact):
+def _ellipsoid_meshes(bodies) -> list:
+    """pyvista surfaces of ellipsoids given as (centre, axes as columns, radii)."""
     import pyvista as pv
 
     meshes = []
-    for c, Q, r in contact.bodies:
+    for c, Q, r in bodies:
         e = pv.ParametricEllipsoid(*r, u_res=40, v_res=20, w_res=10)
         e.points = np.asarray(e.points) @ Q.T + c
         meshes.append(e)
@@ -301,6 +312,10 @@ def run_contact_scene(
     fails below the smallest step (rows written so far are kept).
     """
     summary = summary if summary is not None else {}
+    if scene["solver"]["integrator"] == "explicit":
+        return _run_explicit(
+            scene, out, model=model, comm=comm, t0=t0, check_stop=check_stop, summary=summary
+        )
     if scene["solver"]["integrator"] == "newmark":
         return _run_dynamic(
             scene,
@@ -347,7 +362,7 @@ def run_contact_scene(
 
     def snapshot(tag: str) -> None:
         if png:
-            meshes = _ellipsoid_meshes(contact) if comm.rank == 0 else ()
+            meshes = _ellipsoid_meshes(contact.bodies) if comm.rank == 0 else ()
             snapshot_png(
                 model,
                 out / f"snapshot_{tag}.png",
@@ -490,6 +505,22 @@ def _load_checkpoint(out: Path, comm: MPI.Comm) -> dict[str, np.ndarray]:
         return {k: z[k] for k in z.files}
 
 
+def _bodies_at(scene: dict[str, Any], motions: list) -> Callable[[float], tuple[list, list]]:
+    """``t -> (ellipsoids, velocities)`` of the dynamic runs: at rest until
+    ``solver.settle_time``, then each segment follows its motion."""
+    radii = [np.asarray(seg["radii"], dtype=float) for seg in scene["body"]]
+    t_settle = scene["solver"]["settle_time"]
+    zero = np.zeros(3)
+
+    def bodies_at(t: float):
+        poses = [m.pose(max(t - t_settle, 0.0)) for m in motions]
+        moving = t > t_settle
+        vel = [(p.velocity, p.angular_velocity) if moving else (zero, zero) for p in poses]
+        return [(p.centre, p.rotation, r) for p, r in zip(poses, radii, strict=True)], vel
+
+    return bodies_at
+
+
 def _run_dynamic(
     scene: dict[str, Any],
     out: Path,
@@ -512,15 +543,8 @@ def _run_dynamic(
 
     c, sv, o = scene["contact"], scene["solver"], scene["output"]
     motions = body_motions(scene)
-    radii = [np.asarray(seg["radii"], dtype=float) for seg in scene["body"]]
     t_settle, t_ramp = sv["settle_time"], sv["ramp_time"]
-    zero = np.zeros(3)
-
-    def bodies_at(t: float):
-        poses = [m.pose(max(t - t_settle, 0.0)) for m in motions]
-        moving = t > t_settle
-        vel = [(p.velocity, p.angular_velocity) if moving else (zero, zero) for p in poses]
-        return [(p.centre, p.rotation, r) for p, r in zip(poses, radii, strict=True)], vel
+    bodies_at = _bodies_at(scene, motions)
 
     gamma = sv["gamma"]
     dc = DynamicContact(
@@ -551,7 +575,7 @@ def _run_dynamic(
 
     def snapshot(tag: str) -> None:
         if o["png"]:
-            meshes = _ellipsoid_meshes(contact) if comm.rank == 0 else ()
+            meshes = _ellipsoid_meshes(contact.bodies) if comm.rank == 0 else ()
             snapshot_png(
                 model,
                 out / f"snapshot_{tag}.png",
@@ -667,6 +691,185 @@ def _run_dynamic(
             snapshot(f"stopped_{angle_at(dc.t):04.1f}deg")
             raise SolverDivergence(
                 f"dynamic contact stopped at t = {dc.t:.6g} s ({angle_at(dc.t):.2f} deg): {exc}"
+            ) from None
+        finally:
+            comm.barrier()
+            if o["png"] and comm.rank == 0 and writer.csv_path.exists():
+                _torque_plot(writer.csv_path, out / "torque_angle.png", name)
+    return out
+
+
+def _run_explicit(
+    scene: dict[str, Any],
+    out: Path,
+    *,
+    model: ShellModel,
+    comm: MPI.Comm,
+    t0: float,
+    check_stop: Callable[[str], None],
+    summary: dict[str, Any],
+) -> Path:
+    """The paper's explicit approach (Sec. 3.2): central difference with the lumped mass and
+    forward-increment Lagrange multipliers (:class:`clothfem.contact.film.FilmContact`),
+    fixed step ``solver.safety`` x the stable step at t = 0. Loads ramp up and the body rests
+    as in :func:`_run_dynamic`. One CSV row per ``output.interval`` [s]: the torque, resultant
+    and multiplier sum are the means over its steps (the per-step FILM forces are impulses);
+    fields every ``output.every`` rows. No checkpoints (``--resume`` is refused)."""
+    from .contact.film import FilmContact, FilmParameters
+    from .dynamics import DynamicsDivergence, ShellSystem, integrate_explicit, stable_time_step
+
+    c, sv, o = scene["contact"], scene["solver"], scene["output"]
+    motions = body_motions(scene)
+    t_settle, t_ramp = sv["settle_time"], sv["ramp_time"]
+    bodies_at = _bodies_at(scene, motions)
+    system = ShellSystem(model, rotary_scale=sv["rotary_scale"])
+    load = (lambda t: min(t / t_ramp, 1.0)) if t_ramp > 0 else (lambda t: 1.0)
+    st = stable_time_step(system, lam=load(0.0), iterations=300)
+    dt = sv["safety"] * st.dt_crit
+    rank0_print(
+        f"  explicit: dt_crit {st.dt_crit:.4e} s (power iteration "
+        f"{'converged' if st.converged else 'not converged'} in {st.iterations}), "
+        f"dt {dt:.4e} s"
+    )
+    fc = FilmContact(system, bodies_at, params=FilmParameters(mu=c["mu"]))
+    J = torque_centre(scene)
+    k_torque = _torque_segment(scene)
+    hinge_axis = np.asarray(motions[k_torque].axis) if k_torque is not None else np.zeros(3)
+    aj = _aj_mask(scene, J)
+    hinge_ids = [i for i, m in enumerate(motions) if isinstance(m, HingeMotion)]
+    t_motion = max((motions[i].t_end for i in hinge_ids), default=0.0)
+    t_end = t_settle + t_motion
+    angle_end = math.degrees(motions[k_torque].angle(t_motion)) if k_torque is not None else 0.0
+    name = scene["scene"]["name"]
+    n = fc.n
+    area = fc.mass / (model.material.rho * model.thickness)  # reference lumped areas [m^2]
+
+    def angle_at(t: float) -> float:
+        return math.degrees(motions[k_torque].angle(max(t - t_settle, 0.0))) if hinge_ids else 0.0
+
+    def snapshot(tag: str, t: float) -> None:
+        if o["png"]:
+            meshes = _ellipsoid_meshes(bodies_at(t)[0]) if comm.rank == 0 else ()
+            snapshot_png(
+                model,
+                out / f"snapshot_{tag}.png",
+                title=f"{name} {tag}",
+                extra_meshes=meshes,
+                view="xz",
+            )
+
+    pressure = fem.Function(fem.FunctionSpace(model.mesh, model.V.ufl_element().sub_elements()[0]))
+    pressure.name = "contact_pressure"  # Pa, nodal (lam / reference lumped area), last step
+    model.u.name = "displacement"
+    quarters = [angle_end * q / 4 for q in (1, 2, 3)]
+    interval = o["interval"]
+    n_rows = max(1, math.ceil(t_end / interval - 1e-9))
+    acc = {"tau": np.zeros(3), "res": np.zeros(3), "lam": 0.0, "n": 0, "pen": 0.0}
+    state = {"row": 0, "pen": 0.0, "snap": 0, "contact_wall": 0.0, "t_row": time.perf_counter()}
+
+    def touching_torque() -> np.ndarray:
+        f = fc.forces_on_body()
+        on = np.zeros(n, dtype=bool)
+        if fc.last is not None:
+            idx = np.flatnonzero(fc._free)[fc.last.active]
+            on[idx[fc.last.body[fc.last.active] == k_torque]] = True
+        x = fc.X + model.u.x.array[: 3 * n].reshape(n, 3)
+        tau = joint_torque(x[on], f[on], J) if on.any() else np.zeros(3)
+        return comm.allreduce(tau, op=MPI.SUM)
+
+    with ResultWriter(out, model, name="fabric") as writer:
+
+        def on_step(r) -> None:
+            h = fc.history[-1]
+            acc["tau"] += touching_torque() if c["aj"] == "touching" else fc.torque(J, nodes=aj)
+            acc["res"] += fc.resultant()
+            acc["lam"] += h.sum_lambda
+            acc["n"] += 1
+            acc["pen"] = max(acc["pen"], h.max_penetration)
+            if r.time < (state["row"] + 1) * interval - 1e-12 and r.time < t_end - 1e-12:
+                return
+            state["row"] += 1
+            k = acc["n"]
+            tau, res = acc["tau"] / k, acc["res"] / k
+            angle = angle_at(r.time)
+            now = time.perf_counter()
+            pen_after = max(0.0, -h.min_gap_after) if math.isfinite(h.min_gap_after) else 0.0
+            state["pen"] = max(state["pen"], pen_after)
+            tio = time.perf_counter()
+            if state["row"] % o["every"] == 0:
+                lam = np.zeros(n)
+                if fc.last is not None:
+                    lam[np.flatnonzero(fc._free)] = fc.last.lam_n
+                pressure.x.array[:n] = lam / area
+                pressure.x.scatter_forward()
+                writer.write_fields(r.time, (pressure,))
+            t_io = time.perf_counter() - tio
+            row = {
+                "stage": "settle" if r.time <= t_settle + 1e-12 else "motion",
+                "increment": state["row"],
+                "time": r.time,
+                "dt": r.dt,
+                "load_factor": r.load_factor,
+                "angle_deg": angle,
+                **_torque_columns(tau, res, hinge_axis),
+                "n_active": h.active,
+                "max_penetration": pen_after,
+                "predictor_penetration": acc["pen"],
+                "sum_lam": acc["lam"] / k,
+                "n_stick": h.n_stick,
+                "n_slip": h.active - h.n_stick,
+                "substeps": k,
+                "kinetic_energy": r.kinetic,
+                "strain_energy": r.strain,
+                "dissipation_total": fc.dissipation_total,
+                "t_contact": fc.wall - state["contact_wall"],
+                "t_io": t_io,
+                "wall_time": now - state["t_row"],
+                "elapsed": now - t0,
+            }
+            state["contact_wall"], state["t_row"] = fc.wall, now
+            writer.append_row(row)
+            acc.update(tau=np.zeros(3), res=np.zeros(3), lam=0.0, n=0, pen=0.0)
+            summary.update(
+                final_angle_deg=angle,
+                time=r.time,
+                steps=r.step,
+                cutbacks=0,
+                dt=r.dt,
+                dt_crit=st.dt_crit,
+                max_penetration=state["pen"],
+                newton_iterations=0,
+            )
+            frac = min(max(r.time / t_end, 0.0), 1.0) if t_end > 0 else 1.0
+            rank0_print(
+                f"  [{'#' * int(20 * frac):<20}] t {r.time:7.4f} s  angle {angle:6.2f} deg  "
+                f"|tau| {row['torque_mag']:.4f} N m  row {state['row']}/{n_rows}  steps "
+                f"{r.step}  active {h.active}  {now - t0:.0f} s"
+            )
+            if row["stage"] == "motion" and state["snap"] == 0:
+                state["snap"] = 1
+                snapshot("settled", r.time)
+            while state["snap"] <= 3 and angle >= quarters[state["snap"] - 1] - 1e-9:
+                snapshot(f"{quarters[state['snap'] - 1]:04.1f}deg", r.time)
+                state["snap"] += 1
+            check_stop(f"row {state['row']} (t = {r.time:.6g} s)")
+
+        try:
+            integrate_explicit(
+                system,
+                t_end=t_end,
+                dt=dt,
+                load=load,
+                on_step=on_step,
+                stable=st,
+                contact=fc,
+            )
+            snapshot("final", t_end)
+        except (DynamicsDivergence, FloatingPointError) as exc:
+            t_stop = fc.history[-1].time if fc.history else 0.0
+            snapshot(f"stopped_{angle_at(t_stop):04.1f}deg", t_stop)
+            raise SolverDivergence(
+                f"explicit run stopped at t = {t_stop:.6g} s ({angle_at(t_stop):.2f} deg): {exc}"
             ) from None
         finally:
             comm.barrier()

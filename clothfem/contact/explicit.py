@@ -50,6 +50,7 @@ from clothfem.contact.geometry import (
     check_points,
     closest_point_union,
     closest_points,
+    gap_lower_bound,
 )
 
 __all__ = ["FilmResult", "film_step"]
@@ -83,7 +84,9 @@ class FilmResult(NamedTuple):
     body : (N,) int array
         Index of the contact ellipsoid (-1 where inactive).
     gap : (N,) float array
-        Signed gap to the union at ``x`` (m, ``< 0`` penetration); ``gap*`` where inactive.
+        Signed gap to the union at ``x`` (m, ``< 0`` penetration); ``gap*`` where inactive,
+        there a lower bound (>= offset) for nodes the broad phase cleared
+        (:func:`~clothfem.contact.geometry.gap_lower_bound`).
     stick : (N,) bool array
         Active nodes whose tangential relative velocity was brought to zero.
     dissipation : (N,) float array
@@ -205,14 +208,18 @@ def film_step(
     if int(max_passes) != max_passes or max_passes < 1:
         raise ValueError(f"max_passes must be an integer >= 1, got {max_passes}")
 
-    pr = closest_point_union(xs, ells)
-    active = pr.gap < offset
+    # broad phase: exact projections only where the gap's lower bound does not clear offset
+    gap = gap_lower_bound(xs, ells)
+    scale = max(1.0, float(np.max(np.abs(xs), initial=0.0)))
+    near = np.flatnonzero(gap < offset + _GAP_TOL * scale)
+    pr = closest_point_union(xs[near], ells)
+    gap[near] = pr.gap
+    active = gap < offset
     x = xs.copy()
     v = vs.copy()
     lam_n = np.zeros(n)
     normal = np.zeros((n, 3))
     body = np.full(n, -1, dtype=np.intp)
-    gap = pr.gap.copy()
     stick = np.zeros(n, dtype=bool)
     dissipation = np.zeros(n)
     friction = np.zeros((n, 3))
@@ -220,9 +227,10 @@ def film_step(
 
     a = np.flatnonzero(active)
     if a.size:
-        p = pr.point[a].copy()
-        nr = pr.normal[a].copy()
-        bk = pr.body[a].copy()
+        on = active[near]  # the active nodes among the projected ones (same order as a)
+        p = pr.point[on].copy()
+        nr = pr.normal[on].copy()
+        bk = pr.body[on].copy()
         xa = p + offset * nr
         tol_gap = _GAP_TOL * max(1.0, float(np.max(np.abs(xa))))
         if len(ells) > 1:

@@ -19,6 +19,7 @@ the contact forces for Eq. 28.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -65,6 +66,8 @@ class FilmRecord:
     max_penetration: float  # of the predictor [m] (>= 0)
     sum_lambda: float  # sum of normal multipliers [N]
     min_gap_after: float  # smallest gap after correction [m]
+    n_stick: int  # corrected nodes that stick (all of them if mu is None)
+    dissipation: float  # frictional dissipation of the step [J]
 
 
 def body_state(body) -> BodiesAt:
@@ -94,10 +97,13 @@ class FilmContact:
         self.mass = np.asarray(system.lumped_u[0 : 3 * n : 3])  # kg per node
         self.last: FilmResult | None = None
         self.history: list[FilmRecord] = []
+        self.dissipation_total = 0.0  # frictional dissipation since the start [J]
+        self.wall = 0.0  # seconds spent in the contact corrections
         self._free = np.ones(n, dtype=bool)
 
     def correct_positions(self, x: PETSc.Vec, v_pred: PETSc.Vec, t: float, h: float, rows) -> None:
         """Project the penetrating nodes of the predictor ``x`` (in place)."""
+        t0 = time.perf_counter()
         n = self.n
         free = np.ones(n, dtype=bool)
         u_rows = np.asarray(rows)[np.asarray(rows) < 3 * n]
@@ -123,25 +129,44 @@ class FilmContact:
         self.last = res
         # predictor penetration of each corrected node: lambda dt^2 / m (Eq. 24)
         pen = float(np.max(res.lam_n * h * h / self.mass[free], initial=0.0))
-        gap_after = res.gap if len(res.gap) else np.array([np.inf])
+        gap_after = float(np.min(res.gap, initial=np.inf))
+        sums = self.comm.allreduce(
+            np.array(
+                [
+                    res.active.sum(),
+                    (res.active & res.stick).sum(),
+                    res.lam_n.sum(),
+                    res.dissipation.sum(),
+                ],
+                dtype=float,
+            ),
+            op=MPI.SUM,
+        )
+        peaks = self.comm.allreduce(np.array([pen, -gap_after]), op=MPI.MAX)
+        self.dissipation_total += float(sums[3])
         self.history.append(
             FilmRecord(
                 t,
-                self.comm.allreduce(int(res.active.sum()), op=MPI.SUM),
-                self.comm.allreduce(pen, op=MPI.MAX),
-                self.comm.allreduce(float(res.lam_n.sum()), op=MPI.SUM),
-                self.comm.allreduce(float(np.min(gap_after)), op=MPI.MIN),
+                int(sums[0]),
+                float(peaks[0]),
+                float(sums[2]),
+                float(-peaks[1]),
+                int(sums[1]),
+                float(sums[3]),
             )
         )
+        self.wall += time.perf_counter() - t0
 
     def correct_velocities(self, v: PETSc.Vec) -> None:
         """Post-impact half-step velocities of the nodes corrected in this step (in place)."""
         if self.last is None:
             return
+        t0 = time.perf_counter()
         n = self.n
         va = v.getArray()[: 3 * n].reshape(n, 3)
         idx = np.flatnonzero(self._free)[self.last.active]
         va[idx] = self.last.v[self.last.active]
+        self.wall += time.perf_counter() - t0
 
     def forces_on_body(self) -> np.ndarray:
         """Nodal contact forces on the body [N] of the last step, (n_owned, 3)."""
@@ -149,6 +174,10 @@ class FilmContact:
         if self.last is not None:
             f[self._free] = -self.last.force
         return f
+
+    def resultant(self) -> np.ndarray:
+        """Total contact force on the body(ies) of the last step [N], reduced over ranks."""
+        return self.comm.allreduce(self.forces_on_body().sum(axis=0), op=MPI.SUM)
 
     def torque(self, joint, *, nodes=None) -> np.ndarray:
         """Eq. 28 about ``joint`` [m] over ``nodes`` (mask/indices of owned nodes, or a

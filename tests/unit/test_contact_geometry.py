@@ -12,6 +12,7 @@ from clothfem.contact import (
     closest_point_ellipsoid,
     closest_point_union,
     closest_points,
+    gap_lower_bound,
     gradient_projection,
     implicit_value,
     radial_projection,
@@ -299,3 +300,22 @@ def test_closest_points_batches_bodies_bit_for_bit() -> None:
             assert abs(abs(batched[k].gap[i]) - d_ref) <= 1e-9
     with pytest.raises(ValueError, match="one point array per body"):
         closest_points(xs[:2], bodies)
+
+
+def test_gap_lower_bound_is_a_lower_bound() -> None:
+    """Broad phase of the explicit contact: outside the union never above the exact gap,
+    negative exactly for the points inside, exact for a sphere."""
+    J, bodies = _arm()
+    rng = np.random.default_rng(9)
+    x = J + rng.normal(scale=0.15, size=(3000, 3))
+    lb = gap_lower_bound(x, bodies)
+    exact = closest_point_union(x, bodies).gap
+    inside = np.any([implicit_value(x, *b) < 0 for b in bodies], axis=0)
+    assert inside.any() and not inside.all()
+    np.testing.assert_array_equal(lb < 0, inside)
+    assert np.all(lb[~inside] <= exact[~inside] + 1e-12)
+    assert np.mean(lb > 0.01) > 0.3  # it does clear far points
+    sphere = [(np.array([0.1, 0.0, 0.0]), np.eye(3), np.full(3, 0.05))]
+    np.testing.assert_allclose(
+        gap_lower_bound(x, sphere), closest_point_union(x, sphere).gap, atol=1e-13
+    )
