@@ -130,19 +130,18 @@ class FilmContact:
         # predictor penetration of each corrected node: lambda dt^2 / m (Eq. 24)
         pen = float(np.max(res.lam_n * h * h / self.mass[free], initial=0.0))
         gap_after = float(np.min(res.gap, initial=np.inf))
-        sums = self.comm.allreduce(
-            np.array(
-                [
-                    res.active.sum(),
-                    (res.active & res.stick).sum(),
-                    res.lam_n.sum(),
-                    res.dissipation.sum(),
-                ],
-                dtype=float,
-            ),
-            op=MPI.SUM,
+        sums = np.array(
+            [
+                res.active.sum(),
+                (res.active & res.stick).sum(),
+                res.lam_n.sum(),
+                res.dissipation.sum(),
+            ],
+            dtype=float,
         )
-        peaks = self.comm.allreduce(np.array([pen, -gap_after]), op=MPI.MAX)
+        peaks = np.array([pen, -gap_after])
+        self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+        self.comm.Allreduce(MPI.IN_PLACE, peaks, op=MPI.MAX)
         self.dissipation_total += float(sums[3])
         self.history.append(
             FilmRecord(
