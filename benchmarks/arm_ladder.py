@@ -120,13 +120,8 @@ def floor_rung(rung: dict[str, Any], ranks: int = 2) -> dict[str, Any]:
     return {"name": f"{rung['name']}_np{ranks}", "floor": True, "ranks": ranks, **keys}
 
 
-REF: dict[str, Any] = {
-    "name": "ref24x30_dt0.005",
-    "reference": True,
-    "mesh.n_around": 24,
-    "mesh.n_along": 30,
-    "solver.dt": 0.005,
-}
+MESH24: dict[str, Any] = {"mesh.n_around": 24, "mesh.n_along": 30}
+REF: dict[str, Any] = {"name": "ref24x30_dt0.005", "reference": True, **MESH24, "solver.dt": 0.005}
 LADDER: list[dict[str, Any]] = [
     {"name": "mesh8x10", "mesh.n_around": 8, "mesh.n_along": 10},
     {"name": "mesh12x16", "mesh.n_around": 12, "mesh.n_along": 16},
@@ -136,6 +131,8 @@ LADDER: list[dict[str, Any]] = [
     {"name": "dt0.02", "solver.dt": 0.02},
     {"name": "dt0.005", "solver.dt": 0.005},
     {"name": "static", "solver.integrator": "static"},
+    {"name": "explicit16x20", "solver.integrator": "explicit"},
+    {"name": "explicit24x30", "solver.integrator": "explicit", **MESH24},
     REF,
     floor_rung(REF),  # ref24x30_dt0.005_np2: the reference on 2 ranks (round-off floor)
 ]
@@ -154,6 +151,21 @@ QUICK_LADDER: list[dict[str, Any]] = [
     {"name": "mesh12x16", "mesh.n_around": 12, "mesh.n_along": 16},
     {"name": "mesh16x20", "mesh.n_around": 16, "mesh.n_along": 20},  # dt error of the reference
     {"name": "static", "solver.integrator": "static"},
+    # explicit: central difference + FILM contact, dt = 0.9 dt_crit (not a scene dt)
+    {"name": "explicit8x10", "solver.integrator": "explicit"},
+    {
+        "name": "explicit12x16",
+        "solver.integrator": "explicit",
+        "mesh.n_around": 12,
+        "mesh.n_along": 16,
+    },
+    {
+        "name": "explicit16x20",
+        "solver.integrator": "explicit",
+        "mesh.n_around": 16,
+        "mesh.n_along": 20,
+    },
+    {"name": "explicit24x30", "solver.integrator": "explicit", **MESH24},
     QUICK_REF,
     floor_rung(QUICK_REF),  # ref16x20_dt0.005_np2: the reference on 2 ranks (round-off floor)
 ]
@@ -175,8 +187,8 @@ def rung_cases(base: dict[str, Any], ladder: list[dict[str, Any]]) -> tuple[list
         ranks = rung.get("ranks", 1)
         keys = {k: v for k, v in rung.items() if k not in RUNG_KEYS}
         merged = {**base, **keys}
-        if merged.get("solver.integrator") == "static":
-            merged.pop("solver.dt", None)  # a Newmark-only key
+        if merged.get("solver.integrator") in ("static", "explicit"):
+            merged.pop("solver.dt", None)  # a Newmark-only key (explicit: safety x dt_crit)
         changed = "; ".join(f"{k}={v}" for k, v in keys.items()) or "base"
         params = {
             "reference": "yes" if rung["name"] == ref else "",
@@ -186,9 +198,7 @@ def rung_cases(base: dict[str, Any], ladder: list[dict[str, Any]]) -> tuple[list
             "mesh": f"{merged.get('mesh.n_around', '?')}x{merged.get('mesh.n_along', '?')}",
             "order": merged.get("mesh.order", ""),
             "integrator": merged.get("solver.integrator", ""),
-            "dt_s": merged.get("solver.dt", "")
-            if merged.get("solver.integrator") != "static"
-            else "",
+            "dt_s": merged.get("solver.dt", ""),
         }
         sets = [set_arg(k, v) for k, v in merged.items()]
         cases.append(Case(rung["name"], sets, params, ranks=ranks))

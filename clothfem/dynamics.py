@@ -1145,6 +1145,9 @@ def integrate_explicit(
     stable: StableStep | None = None,
     contact=None,
     rebase: float | None = 0.5,
+    first_step: int = 0,
+    acceleration: PETSc.Vec | None = None,
+    on_state: Callable[[DynamicStep, PETSc.Vec, PETSc.Vec], None] | None = None,
 ) -> tuple[list[DynamicStep], StableStep]:
     """Central difference (velocity Verlet) with the lumped mass, fixed step.
 
@@ -1158,6 +1161,11 @@ def integrate_explicit(
     warns, "off" skips the check. Damping uses the predicted velocity v_n+1/2 + dt/2 a_n
     (explicit; = v_n + dt a_n without contact).
     Prescribed rows follow their values; their velocity is the difference quotient.
+
+    Restart: ``first_step`` k > 0 continues a run of the same ``t_end`` and ``dt`` from the
+    end of its step k (t = k h), the model holding that state, with its ``velocity`` and
+    ``acceleration``; energies and work are then counted from there. ``on_state(record, v,
+    a)`` sees the velocity and acceleration after every step (e.g. to checkpoint them).
     Returns (records, the stability estimate used).
     """
     if check not in ("error", "warn", "off"):
@@ -1193,6 +1201,8 @@ def integrate_explicit(
         if check == "error":
             raise ValueError(msg)
         warnings.warn(msg, stacklevel=2)
+    if not (isinstance(first_step, int) and first_step >= 0):
+        raise ValueError(f"first_step must be an integer >= 0, got {first_step!r}")
     x, v = _start(s, velocity)
     K0 = _initial_K0(s, x, damping)
     r, fe = x.duplicate(), x.duplicate()
@@ -1223,17 +1233,22 @@ def integrate_explicit(
             out += damping.stiffness * tmp.getArray(readonly=True)
         return out
 
+    n_steps = max(1, math.ceil(t_end / dt - 1e-9))
+    h = t_end / n_steps
+    if first_step > n_steps:
+        raise ValueError(f"first_step {first_step} is past the last step {n_steps}")
+    lam = lam_of(first_step * h)
     a = x.duplicate()
-    accel(x, v, lam, a)
+    accel(x, v, lam, a)  # also leaves the forces at x for the energy bookkeeping
+    if acceleration is not None:
+        acceleration.copy(a)
     energy = _Energy(s, x, v, a, lam, damping, K0, lumped=True)
     r, fe = energy.r, energy.fe  # accel() fills them: no second assembly per step
     energy.ready = True
     s.commit(x)
-    n_steps = max(1, math.ceil(t_end / dt - 1e-9))
-    h = t_end / n_steps
     xo, vp = x.duplicate(), x.duplicate()
     records = []
-    for step in range(1, n_steps + 1):
+    for step in range(first_step + 1, n_steps + 1):
         t0 = time.perf_counter()
         t = step * h
         lam = lam_of(t)
@@ -1274,4 +1289,6 @@ def integrate_explicit(
         records.append(rec)
         if on_step is not None:
             on_step(rec)
+        if on_state is not None:
+            on_state(rec, v, a)
     return records, st

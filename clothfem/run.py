@@ -211,9 +211,10 @@ def run_scene(
             f"scene key 'material.rho': the {scene['solver']['integrator']} integrator needs a "
             "density > 0 kg/m^3"
         )
-    if resume and scene["solver"]["integrator"] != "newmark":
+    if resume and scene["solver"]["integrator"] == "static":
         raise SceneError(
-            "--resume needs solver.integrator = 'newmark' (only newmark runs write checkpoints)"
+            "--resume needs solver.integrator = 'newmark' or 'explicit' (static runs write no "
+            "checkpoints)"
         )
     t0 = time.perf_counter()
     model, log = build_model(scene, comm)

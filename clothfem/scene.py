@@ -385,7 +385,8 @@ SCHEMA: dict[str, Section] = {
             "png": Key("bool", "write PNG snapshots", default=True),
             "checkpoint_every": Key(
                 "int",
-                "newmark: write a restart checkpoint every N accepted steps (0 = never)",
+                "newmark: write a restart checkpoint every N accepted steps (explicit: every N "
+                "history rows; 0 = never)",
                 default=10,
                 lo=0,
             ),

@@ -314,7 +314,14 @@ def run_contact_scene(
     summary = summary if summary is not None else {}
     if scene["solver"]["integrator"] == "explicit":
         return _run_explicit(
-            scene, out, model=model, comm=comm, t0=t0, check_stop=check_stop, summary=summary
+            scene,
+            out,
+            model=model,
+            comm=comm,
+            t0=t0,
+            check_stop=check_stop,
+            resume=resume,
+            summary=summary,
         )
     if scene["solver"]["integrator"] == "newmark":
         return _run_dynamic(
@@ -707,6 +714,7 @@ def _run_explicit(
     comm: MPI.Comm,
     t0: float,
     check_stop: Callable[[str], None],
+    resume: bool,
     summary: dict[str, Any],
 ) -> Path:
     """The paper's explicit approach (Sec. 3.2): central difference with the lumped mass and
@@ -714,9 +722,16 @@ def _run_explicit(
     fixed step ``solver.safety`` x the stable step at t = 0. Loads ramp up and the body rests
     as in :func:`_run_dynamic`. One CSV row per ``output.interval`` [s]: the torque, resultant
     and multiplier sum are the means over its steps (the per-step FILM forces are impulses);
-    fields every ``output.every`` rows. No checkpoints (``--resume`` is refused)."""
+    fields every ``output.every`` rows; a restart checkpoint (state, velocity, acceleration,
+    step size) every ``output.checkpoint_every`` rows."""
     from .contact.film import FilmContact, FilmParameters
-    from .dynamics import DynamicsDivergence, ShellSystem, integrate_explicit, stable_time_step
+    from .dynamics import (
+        DynamicsDivergence,
+        ShellSystem,
+        StableStep,
+        integrate_explicit,
+        stable_time_step,
+    )
 
     c, sv, o = scene["contact"], scene["solver"], scene["output"]
     motions = body_motions(scene)
@@ -724,14 +739,40 @@ def _run_explicit(
     bodies_at = _bodies_at(scene, motions)
     system = ShellSystem(model, rotary_scale=sv["rotary_scale"])
     load = (lambda t: min(t / t_ramp, 1.0)) if t_ramp > 0 else (lambda t: 1.0)
-    st = stable_time_step(system, lam=load(0.0), iterations=300)
-    dt = sv["safety"] * st.dt_crit
+    state = {"row": 0, "pen": 0.0, "snap": 0, "contact_wall": 0.0, "t_row": time.perf_counter()}
+    start: dict[str, Any] = {"step": 0, "v": None, "a": None}
+    keep = None
+    if resume:
+        data = _load_checkpoint(out, comm)
+        model.restore_arrays({k[6:]: data[k] for k in data if k.startswith("model_")})
+        for k in ("v", "a"):
+            vec = system.create_vector()
+            if data[k].shape != vec.getArray().shape:
+                raise SceneError("--resume: the checkpoint does not match this mesh / ranks")
+            vec.getArray()[:] = data[k]
+            start[k] = vec
+        st = StableStep(
+            *(float(data[f"st_{k}"]) for k in ("dt_crit", "omega_max", "dt_bound")),
+            int(data["st_iterations"]),
+            bool(data["st_converged"]),
+        )
+        dt = float(data["dt"])
+        start["step"] = int(data["run_step"])
+        state.update(row=int(data["run_row"]), snap=int(data["run_snap"]))
+        state["pen"] = float(data["run_pen"])
+        keep = state["row"]
+    else:
+        st = stable_time_step(system, lam=load(0.0), iterations=300)
+        dt = sv["safety"] * st.dt_crit
     rank0_print(
         f"  explicit: dt_crit {st.dt_crit:.4e} s (power iteration "
         f"{'converged' if st.converged else 'not converged'} in {st.iterations}), "
         f"dt {dt:.4e} s"
     )
     fc = FilmContact(system, bodies_at, params=FilmParameters(mu=c["mu"]))
+    if resume:
+        fc.dissipation_total = float(data["contact_dissipation"])
+        rank0_print(f"  resumed from the checkpoint after step {start['step']} (row {keep})")
     J = torque_centre(scene)
     k_torque = _torque_segment(scene)
     hinge_axis = np.asarray(motions[k_torque].axis) if k_torque is not None else np.zeros(3)
@@ -764,7 +805,7 @@ def _run_explicit(
     quarters = [angle_end * q / 4 for q in (1, 2, 3)]
     interval = o["interval"]
     acc = {"tau": np.zeros(3), "res": np.zeros(3), "lam": 0.0, "n": 0, "pen": 0.0}
-    state = {"row": 0, "pen": 0.0, "snap": 0, "contact_wall": 0.0, "t_row": time.perf_counter()}
+    xdmf_name = "fabric" if keep is None else f"fabric_resumed_{start['step']:06d}"
 
     def touching_torque() -> np.ndarray:
         f = fc.forces_on_body()
@@ -776,7 +817,19 @@ def _run_explicit(
         tau = joint_torque(x[on], f[on], J) if on.any() else np.zeros(3)
         return comm.allreduce(tau, op=MPI.SUM)
 
-    with ResultWriter(out, model, name="fabric") as writer:
+    with ResultWriter(out, model, name=xdmf_name, keep_rows=keep) as writer:
+
+        def on_state(r, v, a) -> None:  # after on_step: checkpoint at the cadence of rows
+            if not state.pop("checkpoint", False):
+                return
+            run = {"run_step": r.step, "run_row": state["row"], "run_snap": state["snap"]}
+            run.update(run_pen=state["pen"], contact_dissipation=fc.dissipation_total, dt=dt)
+            run.update({f"st_{k}": getattr(st, k) for k in StableStep.__dataclass_fields__})
+            model_data = {f"model_{k}": val for k, val in model.state_arrays().items()}
+            arrays = {"v": v.getArray(readonly=True).copy(), "a": a.getArray(readonly=True)}
+            _checkpoint(
+                out, comm, {**model_data, **arrays, **{k: np.array(x) for k, x in run.items()}}
+            )
 
         def on_step(r) -> None:
             h = fc.history[-1]
@@ -828,6 +881,8 @@ def _run_explicit(
             }
             state["contact_wall"], state["t_row"] = fc.wall, now
             writer.append_row(row)
+            every = o["checkpoint_every"]
+            state["checkpoint"] = bool(every) and state["row"] % every == 0
             acc.update(tau=np.zeros(3), res=np.zeros(3), lam=0.0, n=0, pen=0.0)
             summary.update(
                 final_angle_deg=angle,
@@ -862,6 +917,10 @@ def _run_explicit(
                 on_step=on_step,
                 stable=st,
                 contact=fc,
+                first_step=start["step"],
+                velocity=start["v"],
+                acceleration=start["a"],
+                on_state=on_state,
             )
             snapshot("final", t_end)
         except (DynamicsDivergence, FloatingPointError) as exc:

@@ -39,8 +39,8 @@ pytestmark = [
 ]
 
 
-def _cmd(out: Path, *extra: str, ranks: int = 1) -> list[str]:
-    sets = [a for s in SETS for a in ("--set", s)]
+def _cmd(out: Path, *extra: str, ranks: int = 1, scene_sets: list[str] = SETS) -> list[str]:
+    sets = [a for s in scene_sets for a in ("--set", s)]
     run = [sys.executable, "-m", "clothfem.cli", "run", str(SCENE), "--out", str(out), *sets]
     if ranks == 1:
         return [*run, *extra]
@@ -52,9 +52,15 @@ def _rows(out: Path) -> list[dict[str, str]]:
     return list(csv.DictReader((out / "history.csv").open()))
 
 
-def _run(out: Path, *extra: str, ranks: int = 1) -> subprocess.CompletedProcess:
+def _run(
+    out: Path, *extra: str, ranks: int = 1, scene_sets: list[str] = SETS
+) -> subprocess.CompletedProcess:
     res = subprocess.run(
-        _cmd(out, *extra, ranks=ranks), capture_output=True, text=True, timeout=900, env=ENV
+        _cmd(out, *extra, ranks=ranks, scene_sets=scene_sets),
+        capture_output=True,
+        text=True,
+        timeout=900,
+        env=ENV,
     )
     assert res.returncode == 0, res.stderr[-3000:]
     return res
@@ -103,9 +109,10 @@ def test_dynamic_scene_same_on_two_ranks(reference, tmp_path):
     assert compared >= 3
 
 
-def test_resume_after_sigterm_reproduces_the_history(reference, tmp_path):
-    out = tmp_path / "interrupted"
-    proc = subprocess.Popen(_cmd(out), env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+def _interrupt_and_resume(reference, out: Path, scene_sets: list[str]) -> list[dict[str, str]]:
+    """SIGTERM a run once half of the reference's rows are written, resume it; its rows."""
+    cmd = _cmd(out, scene_sets=scene_sets)
+    proc = subprocess.Popen(cmd, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     n_ref = len(reference)
     deadline = time.monotonic() + 600
     while time.monotonic() < deadline and proc.poll() is None:
@@ -118,13 +125,43 @@ def test_resume_after_sigterm_reproduces_the_history(reference, tmp_path):
     assert proc.returncode == 130, err.decode()[-2000:]  # stopped cleanly by the signal
     stopped = _rows(out)
     assert len(stopped) < n_ref
-    res = _run(out, "--resume")
+    res = _run(out, "--resume", scene_sets=scene_sets)
     assert "resumed from the checkpoint" in res.stdout
     rows = _rows(out)
     assert len(rows) == n_ref
+    return rows
+
+
+def test_resume_after_sigterm_reproduces_the_history(reference, tmp_path):
+    rows = _interrupt_and_resume(reference, tmp_path / "interrupted", SETS)
     for a, b in zip(reference, rows, strict=True):
         for key in ("time", "angle_deg", "torque_x", "torque_y", "torque_z", "n_active"):
             assert float(b[key]) == pytest.approx(float(a[key]), rel=1e-10, abs=1e-14), key
+
+
+EXPLICIT_SETS = [
+    "solver.integrator=explicit",
+    "solver.rotary_scale=1000",
+    "solver.settle_time=0.05",
+    "solver.ramp_time=0.05",
+    "body.1.angle_max=3.0",
+    "output.interval=0.004",
+    "output.checkpoint_every=2",
+]
+
+
+def test_explicit_resume_after_sigterm_reproduces_the_history(tmp_path):
+    """The explicit run (central difference + FILM) checkpoints every 2 rows; stopped by
+    SIGTERM and resumed, it gives the uninterrupted rows (the state, velocity, acceleration
+    and step size are restored, so the same steps follow)."""
+    _run(tmp_path / "reference", scene_sets=EXPLICIT_SETS)
+    reference = _rows(tmp_path / "reference")
+    assert math.isclose(float(reference[-1]["angle_deg"]), 3.0)
+    rows = _interrupt_and_resume(reference, tmp_path / "interrupted", EXPLICIT_SETS)
+    for a, b in zip(reference, rows, strict=True):
+        for key in ("time", "angle_deg", "torque_x", "torque_y", "torque_z", "n_active"):
+            assert float(b[key]) == pytest.approx(float(a[key]), rel=1e-10, abs=1e-14), key
+        assert float(b["max_penetration"]) <= 1e-3 * THICKNESS
 
 
 def test_main_demo_small(tmp_path):
