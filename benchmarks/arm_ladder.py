@@ -5,8 +5,10 @@ Each rung of LADDER (below: a dict of ``--set`` overrides on top of BASE) is one
 whose summary.json already says completed (same overrides and ranks) is skipped unless
 ``--force``. The rungs vary one thing at a time around BASE (16x20 quadratic mesh, Newmark
 gamma 0.6, dt = 0.01 s): the mesh (8x10, 12x16, 16x20, 24x30), the geometry order
-(mesh.order 1 vs 2), the time step (solver.dt 0.02, 0.01, 0.005) and the integrator (static
-vs newmark); one more rung repeats the reference on 2 MPI ranks (the round-off floor, below).
+(mesh.order 1 vs 2), the element order (element.degree 1 on a mesh with the same nodes), the
+time step (solver.dt 0.02, 0.01, 0.005) and the integrator (static, newmark, explicit:
+central difference + FILM contact at 0.9 dt_crit); one more rung repeats the reference on 2
+MPI ranks (the round-off floor, below).
 
 **Reference** = the rung marked ``"reference": True``: the finest setting, 24x30 quadratic
 mesh with Newmark dt = 0.005 s (``--quick``: 16x20, dt = 0.005 s, around the 8x10 default).
@@ -128,6 +130,8 @@ LADDER: list[dict[str, Any]] = [
     {"name": "base16x20"},  # = BASE: mesh 16x20, order 2, newmark dt 0.01
     {"name": "mesh24x30", "mesh.n_around": 24, "mesh.n_along": 30},
     {"name": "order1", "mesh.order": 1},
+    # element order: degree-1 u and theta on the mesh with the base's node count
+    {"name": "degree1_32x40", "element.degree": 1, "mesh.n_around": 32, "mesh.n_along": 40},
     {"name": "dt0.02", "solver.dt": 0.02},
     {"name": "dt0.005", "solver.dt": 0.005},
     {"name": "static", "solver.integrator": "static"},
@@ -166,6 +170,21 @@ QUICK_LADDER: list[dict[str, Any]] = [
         "mesh.n_along": 20,
     },
     {"name": "explicit24x30", "solver.integrator": "explicit", **MESH24},
+    # element order: degree-1 u and theta, node counts of the 8x10 and 16x20 rungs
+    {
+        "name": "explicit_deg1_16x20",
+        "solver.integrator": "explicit",
+        "element.degree": 1,
+        "mesh.n_around": 16,
+        "mesh.n_along": 20,
+    },
+    {
+        "name": "explicit_deg1_32x40",
+        "solver.integrator": "explicit",
+        "element.degree": 1,
+        "mesh.n_around": 32,
+        "mesh.n_along": 40,
+    },
     QUICK_REF,
     floor_rung(QUICK_REF),  # ref16x20_dt0.005_np2: the reference on 2 ranks (round-off floor)
 ]

@@ -136,6 +136,7 @@ def build_model(
         loads=_loads(scene),
         supports=_supports(scene),
         warp=mat["warp"],
+        degree=scene["element"]["degree"],
         quadrature=Quadrature(
             reduced=scene["element"]["reduced_quadrature"],
             stabilization=scene["element"]["stabilization"],
@@ -144,7 +145,8 @@ def build_model(
     n_nodes = comm.allreduce(model.n_owned, op=MPI.SUM)
     n_cells = comm.allreduce(sm.mesh.topology.index_map(2).size_local, op=MPI.SUM)
     log = [
-        f"mesh: {scene['mesh']['generator']}, {n_cells} {scene['mesh']['cell']} cells, "
+        f"mesh: {scene['mesh']['generator']}, {n_cells} {scene['mesh']['cell']} cells "
+        f"(order {scene['mesh']['order']}, u and theta of degree {scene['element']['degree']}), "
         f"{n_nodes} nodes, {5 * n_nodes} unknowns (u: 3, theta: 2 per node), {comm.size} rank(s)",
         f"material: E1 {mat['E1']:.4g} Pa, E2 {mat['E2']:.4g} Pa, G12 {mat['G12']:.4g} Pa, "
         f"nu12 {mat['nu12']:g}, rho {mat['rho']:g} kg/m^3, t {mat['thickness']:g} m",

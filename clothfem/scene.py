@@ -185,6 +185,14 @@ SCHEMA: dict[str, Section] = {
     ),
     "element": Section(
         {
+            "degree": Key(
+                "int",
+                "polynomial degree of u and theta (2: nine-node quadrilaterals / six-node "
+                "triangles on a second-order mesh; 1: four-node / three-node)",
+                default=2,
+                lo=1,
+                hi=2,
+            ),
             "reduced_quadrature": Key(
                 "int",
                 "quadrature degree of membrane and transverse shear (2: 2x2 Gauss points on "
