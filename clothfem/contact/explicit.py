@@ -138,6 +138,18 @@ def _check_velocities(
     return vc, om
 
 
+def _near_others(
+    x: FloatArray, own: NDArray[np.intp], ells: Sequence[EllipsoidData], cut: float
+) -> NDArray[np.intp]:
+    """Indices of the points whose gap lower bound to an ellipsoid other than ``own`` is
+    below ``cut``."""
+    if len(ells) == 1:
+        return np.zeros(0, dtype=np.intp)
+    lb = gap_lower_bound(x, ells, per_body=True)
+    lb[np.arange(len(own)), own] = np.inf
+    return np.flatnonzero(lb.min(axis=1) < cut)
+
+
 def film_step(
     x_star: ArrayLike,
     v_star: ArrayLike,
@@ -238,6 +250,11 @@ def film_step(
             # another ellipsoid of the union (for a single convex body one pass is exact)
             todo = np.arange(a.size)
             for _ in range(int(max_passes) - 1):
+                # a node on its body's surface is farther than offset from the others
+                # unless their lower bound says it may not be
+                todo = todo[_near_others(xa[todo], bk[todo], ells, offset)]
+                if todo.size == 0:
+                    break
                 chk = closest_point_union(xa[todo], ells)
                 bad = chk.gap < offset - tol_gap
                 todo = todo[bad]
@@ -281,9 +298,14 @@ def film_step(
         friction[a] = ma[:, None] * dv_t / dt
         normal[a] = nr
         body[a] = bk
-        fin = closest_point_union(xa, ells)
-        gap[a] = fin.gap
-        unresolved[a] = fin.gap < offset - tol_gap
+        # final gaps: offset from the own body (by construction), less only where another
+        # ellipsoid may come closer
+        fin_gap = np.full(a.size, offset)
+        check = _near_others(xa, bk, ells, offset)
+        if check.size:
+            fin_gap[check] = closest_point_union(xa[check], ells).gap
+        gap[a] = fin_gap
+        unresolved[a] = fin_gap < offset - tol_gap
     force = mass[:, None] * (x - xs) / dt**2
     return FilmResult(
         x, v, active, lam_n, force, friction, normal, body, gap, stick, dissipation, unresolved

@@ -505,9 +505,12 @@ def closest_point_union(
     return UnionProjection(point, normal, gap, body, inside_other)
 
 
-def gap_lower_bound(x: ArrayLike, bodies: Sequence[EllipsoidData]) -> FloatArray:
+def gap_lower_bound(
+    x: ArrayLike, bodies: Sequence[EllipsoidData], *, per_body: bool = False
+) -> FloatArray:
     """Broad phase: ``min_k (s_k - 1) r_min,k`` [m], (N,), a lower bound of the gap to the
-    union for points outside it, negative exactly for the points inside an ellipsoid.
+    union for points outside it, negative exactly for the points inside an ellipsoid
+    (``per_body``: the (N, K) values of each ellipsoid instead of their minimum).
 
     With ``s^2 = f + 1`` (Eq. 26) the point lies on the surface of the ellipsoid scaled by s;
     for s > 1 that surface keeps a distance ``>= (s - 1) r_min`` from the ellipsoid (the
@@ -518,11 +521,10 @@ def gap_lower_bound(x: ArrayLike, bodies: Sequence[EllipsoidData]) -> FloatArray
     """
     x = check_points(x)
     ells = _check_bodies(bodies)
-    lb = np.full(x.shape[0], np.inf)
-    for c, Q, r in ells:
-        s = np.sqrt(_f_local((x - c) @ Q, r) + 1.0)
-        np.minimum(lb, (s - 1.0) * r.min(), out=lb)
-    return lb
+    lb = np.empty((x.shape[0], len(ells)))
+    for k, (c, Q, r) in enumerate(ells):
+        lb[:, k] = (np.sqrt(_f_local((x - c) @ Q, r) + 1.0) - 1.0) * r.min()
+    return lb if per_body else lb.min(axis=1, initial=np.inf)
 
 
 def candidates(
