@@ -809,10 +809,7 @@ def _run_explicit(
 
     def touching_torque() -> np.ndarray:
         f = fc.forces_on_body()
-        on = np.zeros(n, dtype=bool)
-        if fc.last is not None:
-            idx = np.flatnonzero(fc._free)[fc.last.active]
-            on[idx[fc.last.body[fc.last.active] == k_torque]] = True
+        on = fc.contact_body() == k_torque
         x = fc.X + model.u.x.array[: 3 * n].reshape(n, 3)
         tau = joint_torque(x[on], f[on], J) if on.any() else np.zeros(3)
         return comm.allreduce(tau, op=MPI.SUM)
@@ -849,10 +846,7 @@ def _run_explicit(
             state["pen"] = max(state["pen"], pen_after)
             tio = time.perf_counter()
             if state["row"] % o["every"] == 0:
-                lam = np.zeros(n)
-                if fc.last is not None:
-                    lam[np.flatnonzero(fc._free)] = fc.last.lam_n
-                pressure.x.array[:n] = lam / area
+                pressure.x.array[:n] = fc.nodal_multipliers() / area
                 pressure.x.scatter_forward()
                 writer.write_fields(r.time, (pressure,))
             t_io = time.perf_counter() - tio

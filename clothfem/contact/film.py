@@ -174,6 +174,20 @@ class FilmContact:
             f[self._free] = -self.last.force
         return f
 
+    def nodal_multipliers(self) -> np.ndarray:
+        """Normal multipliers of the last step per owned node [N] (0 where not in contact)."""
+        lam = np.zeros(self.n)
+        if self.last is not None:
+            lam[self._free] = self.last.lam_n
+        return lam
+
+    def contact_body(self) -> np.ndarray:
+        """Index of the ellipsoid each owned node touched in the last step (-1: none)."""
+        body = np.full(self.n, -1, dtype=np.intp)
+        if self.last is not None:
+            body[self._free] = self.last.body
+        return body
+
     def resultant(self) -> np.ndarray:
         """Total contact force on the body(ies) of the last step [N], reduced over ranks."""
         return self.comm.allreduce(self.forces_on_body().sum(axis=0), op=MPI.SUM)
