@@ -29,6 +29,7 @@ import math
 import os
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -312,19 +313,11 @@ def run_contact_scene(
     fails below the smallest step (rows written so far are kept).
     """
     summary = summary if summary is not None else {}
-    if scene["solver"]["integrator"] == "explicit":
-        return _run_explicit(
-            scene,
-            out,
-            model=model,
-            comm=comm,
-            t0=t0,
-            check_stop=check_stop,
-            resume=resume,
-            summary=summary,
-        )
-    if scene["solver"]["integrator"] == "newmark":
-        return _run_dynamic(
+    dynamic = {"explicit": _run_explicit, "newmark": _run_dynamic}.get(
+        scene["solver"]["integrator"]
+    )
+    if dynamic is not None:
+        return dynamic(
             scene,
             out,
             model=model,
@@ -368,15 +361,7 @@ def run_contact_scene(
         return comm.allreduce(tau, op=MPI.SUM)
 
     def snapshot(tag: str) -> None:
-        if png:
-            meshes = _ellipsoid_meshes(contact.bodies) if comm.rank == 0 else ()
-            snapshot_png(
-                model,
-                out / f"snapshot_{tag}.png",
-                title=f"{name} {tag}",
-                extra_meshes=meshes,
-                view="xz",
-            )
+        _snapshot(scene, model, out, comm, tag, contact.bodies)
 
     increments = c["increments"]
     hinge_ids = [i for i, m in enumerate(motions) if isinstance(m, HingeMotion)]
@@ -528,6 +513,75 @@ def _bodies_at(scene: dict[str, Any], motions: list) -> Callable[[float], tuple[
     return bodies_at
 
 
+@dataclass(frozen=True)
+class _Plan:
+    """What both dynamic runners derive from a scene: the Eq. 28 centre J, node set AJ and
+    hinge axis of the torque segment, and the clock (at rest until ``t_settle``, then the
+    hinge motion until ``t_end``)."""
+
+    motions: list
+    k_torque: int | None
+    J: np.ndarray
+    aj: Callable[[np.ndarray], np.ndarray] | None
+    hinge_axis: np.ndarray
+    hinged: bool
+    t_settle: float
+    t_end: float
+
+    def angle_at(self, t: float) -> float:
+        """Flexion angle [deg] of the torque segment at time t [s]."""
+        if not self.hinged:
+            return 0.0
+        return math.degrees(self.motions[self.k_torque].angle(max(t - self.t_settle, 0.0)))
+
+    def quarters(self) -> list[float]:
+        """The angles [deg] of the first three quarters of the motion (snapshots)."""
+        return [self.angle_at(self.t_end) * q / 4 for q in (1, 2, 3)]
+
+
+def _plan(scene: dict[str, Any], motions: list) -> _Plan:
+    J = torque_centre(scene)
+    k = _torque_segment(scene)
+    hinge_ids = [i for i, m in enumerate(motions) if isinstance(m, HingeMotion)]
+    t_settle = scene["solver"]["settle_time"]
+    return _Plan(
+        motions=motions,
+        k_torque=k,
+        J=J,
+        aj=_aj_mask(scene, J),
+        hinge_axis=np.asarray(motions[k].axis) if k is not None else np.zeros(3),
+        hinged=bool(hinge_ids),
+        t_settle=t_settle,
+        t_end=t_settle + max((motions[i].t_end for i in hinge_ids), default=0.0),
+    )
+
+
+def _snapshot(
+    scene: dict[str, Any], model: ShellModel, out: Path, comm: MPI.Comm, tag: str, bodies
+) -> None:
+    """``out/snapshot_<tag>.png`` of the fabric with the ellipsoids ``bodies`` (if PNGs)."""
+    if scene["output"]["png"]:
+        snapshot_png(
+            model,
+            out / f"snapshot_{tag}.png",
+            title=f"{scene['scene']['name']} {tag}",
+            extra_meshes=_ellipsoid_meshes(bodies) if comm.rank == 0 else (),
+            view="xz",
+        )
+
+
+def _progress_snapshots(plan: _Plan, state: dict, stage: str, angle: float, snap) -> None:
+    """``snap("settled")`` when the motion starts, then ``snap(<angle>deg)`` at each quarter of
+    the motion; ``state["snap"]`` counts the snapshots taken (checkpointed)."""
+    if stage == "motion" and state["snap"] == 0:
+        state["snap"] = 1
+        snap("settled")
+    quarters = plan.quarters()
+    while state["snap"] <= 3 and angle >= quarters[state["snap"] - 1] - 1e-9:
+        snap(f"{quarters[state['snap'] - 1]:04.1f}deg")
+        state["snap"] += 1
+
+
 def _run_dynamic(
     scene: dict[str, Any],
     out: Path,
@@ -567,29 +621,12 @@ def _run_dynamic(
         gamma=gamma,
     )
     contact = dc.contact
-    J = torque_centre(scene)
-    k_torque = _torque_segment(scene)
-    hinge_axis = np.asarray(motions[k_torque].axis) if k_torque is not None else np.zeros(3)
-    aj = _aj_mask(scene, J)
-    hinge_ids = [i for i, m in enumerate(motions) if isinstance(m, HingeMotion)]
-    t_motion = max((motions[i].t_end for i in hinge_ids), default=0.0)
-    t_end = t_settle + t_motion
-    angle_end = math.degrees(motions[k_torque].angle(t_motion)) if k_torque is not None else 0.0
+    plan = _plan(scene, motions)
+    J, aj, hinge_axis, t_end, angle_at = plan.J, plan.aj, plan.hinge_axis, plan.t_end, plan.angle_at
     name = scene["scene"]["name"]
 
-    def angle_at(t: float) -> float:
-        return math.degrees(motions[k_torque].angle(max(t - t_settle, 0.0))) if hinge_ids else 0.0
-
     def snapshot(tag: str) -> None:
-        if o["png"]:
-            meshes = _ellipsoid_meshes(contact.bodies) if comm.rank == 0 else ()
-            snapshot_png(
-                model,
-                out / f"snapshot_{tag}.png",
-                title=f"{name} {tag}",
-                extra_meshes=meshes,
-                view="xz",
-            )
+        _snapshot(scene, model, out, comm, tag, contact.bodies)
 
     state = {"step": 0, "rows": 0, "cut": 0, "pen": 0.0, "newton": 0, "snap": 0}
     keep = None
@@ -604,7 +641,6 @@ def _run_dynamic(
     pressure = fem.Function(contact.S, name="contact_pressure")  # Pa, nodal (lam / area)
     model.u.name = "displacement"
     timers0 = dict(contact.timers)
-    quarters = [angle_end * q / 4 for q in (1, 2, 3)]
 
     with ResultWriter(out, model, name=xdmf_name, keep_rows=keep) as writer:
 
@@ -677,12 +713,7 @@ def _run_dynamic(
                 f"{r.cutbacks}  active {cr.n_active}  newton {cr.newton_iterations}  "
                 f"{now - t0:.0f} s"
             )
-            if row["stage"] == "motion" and state["snap"] == 0:
-                state["snap"] = 1
-                snapshot("settled")
-            while state["snap"] <= 3 and angle >= quarters[state["snap"] - 1] - 1e-9:
-                snapshot(f"{quarters[state['snap'] - 1]:04.1f}deg")
-                state["snap"] += 1
+            _progress_snapshots(plan, state, row["stage"], angle, snapshot)
             check_stop(f"step {step} (t = {r.time:.6g} s)")
 
         try:
@@ -773,36 +804,18 @@ def _run_explicit(
     if resume:
         fc.dissipation_total = float(data["contact_dissipation"])
         rank0_print(f"  resumed from the checkpoint after step {start['step']} (row {keep})")
-    J = torque_centre(scene)
-    k_torque = _torque_segment(scene)
-    hinge_axis = np.asarray(motions[k_torque].axis) if k_torque is not None else np.zeros(3)
-    aj = _aj_mask(scene, J)
-    hinge_ids = [i for i, m in enumerate(motions) if isinstance(m, HingeMotion)]
-    t_motion = max((motions[i].t_end for i in hinge_ids), default=0.0)
-    t_end = t_settle + t_motion
-    angle_end = math.degrees(motions[k_torque].angle(t_motion)) if k_torque is not None else 0.0
-    name = scene["scene"]["name"]
+    plan = _plan(scene, motions)
+    J, aj, hinge_axis, t_end, angle_at = plan.J, plan.aj, plan.hinge_axis, plan.t_end, plan.angle_at
+    k_torque, name = plan.k_torque, scene["scene"]["name"]
     n = fc.n
     area = fc.mass / (model.material.rho * model.thickness)  # reference lumped areas [m^2]
 
-    def angle_at(t: float) -> float:
-        return math.degrees(motions[k_torque].angle(max(t - t_settle, 0.0))) if hinge_ids else 0.0
-
     def snapshot(tag: str, t: float) -> None:
-        if o["png"]:
-            meshes = _ellipsoid_meshes(bodies_at(t)[0]) if comm.rank == 0 else ()
-            snapshot_png(
-                model,
-                out / f"snapshot_{tag}.png",
-                title=f"{name} {tag}",
-                extra_meshes=meshes,
-                view="xz",
-            )
+        _snapshot(scene, model, out, comm, tag, bodies_at(t)[0])
 
     pressure = fem.Function(fem.FunctionSpace(model.mesh, model.V.ufl_element().sub_elements()[0]))
     pressure.name = "contact_pressure"  # Pa, nodal (lam / reference lumped area), last step
     model.u.name = "displacement"
-    quarters = [angle_end * q / 4 for q in (1, 2, 3)]
     interval = o["interval"]
     acc = {"tau": np.zeros(3), "res": np.zeros(3), "lam": 0.0, "n": 0, "pen": 0.0}
     xdmf_name = "fabric" if keep is None else f"fabric_resumed_{start['step']:06d}"
@@ -894,12 +907,7 @@ def _run_explicit(
                 f"|tau| {row['torque_mag']:.4f} N m  row {state['row']}  steps "
                 f"{r.step}  active {h.active}  {now - t0:.0f} s"
             )
-            if row["stage"] == "motion" and state["snap"] == 0:
-                state["snap"] = 1
-                snapshot("settled", r.time)
-            while state["snap"] <= 3 and angle >= quarters[state["snap"] - 1] - 1e-9:
-                snapshot(f"{quarters[state['snap'] - 1]:04.1f}deg", r.time)
-                state["snap"] += 1
+            _progress_snapshots(plan, state, row["stage"], angle, lambda tag: snapshot(tag, r.time))
             check_stop(f"row {state['row']} (t = {r.time:.6g} s)")
 
         try:
