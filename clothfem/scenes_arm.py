@@ -809,6 +809,7 @@ def _run_explicit(
     k_torque, name = plan.k_torque, scene["scene"]["name"]
     n = fc.n
     area = fc.mass / (model.material.rho * model.thickness)  # reference lumped areas [m^2]
+    in_aj = None if aj is None else np.asarray(aj(fc.X.T.copy()), dtype=bool)  # fixed set AJ
 
     def snapshot(tag: str, t: float) -> None:
         _snapshot(scene, model, out, comm, tag, bodies_at(t)[0])
@@ -843,7 +844,7 @@ def _run_explicit(
 
         def on_step(r) -> None:
             h = fc.history[-1]
-            acc["tau"] += touching_torque() if c["aj"] == "touching" else fc.torque(J, nodes=aj)
+            acc["tau"] += touching_torque() if c["aj"] == "touching" else fc.torque(J, nodes=in_aj)
             acc["res"] += fc.resultant()
             acc["lam"] += h.sum_lambda
             acc["n"] += 1
