@@ -3,15 +3,19 @@ r"""Error against run time on the arm-sleeve scene: a ladder of discretisation s
 Each rung of LADDER (below: a dict of ``--set`` overrides on top of BASE) is one
 ``clothfem run demos/scenes/arm_sleeve.toml`` subprocess in ``OUT/ladder/<name>/``; a rung
 whose summary.json already says completed (same overrides and ranks) is skipped unless
-``--force``. The rungs vary one thing at a time around BASE (16x20 quadratic mesh, Newmark
-gamma 0.6, dt = 0.01 s): the mesh (8x10, 12x16, 16x20, 24x30), the geometry order
-(mesh.order 1 vs 2), the element order (element.degree 1 on a mesh with the same nodes), the
-time step (solver.dt 0.02, 0.01, 0.005) and the integrator (static, newmark, explicit:
-central difference + FILM contact at 0.9 dt_crit); one more rung repeats the reference on 2
-MPI ranks (the round-off floor, below).
+``--force``. The rungs vary one thing at a time around BASE (16x20 quadratic mesh, explicit
+central difference + FILM contact at dt = 0.9 dt_crit): the mesh (8x10, 12x16, 16x20,
+24x30), the time step (solver.safety 0.45: half the base's dt), the geometry order
+(mesh.order 1 vs 2), the element order (element.degree 1 on a mesh with the base's node
+count) and the integrator (implicit Newmark dt = 0.01 s on 8x10 (the default scene), 12x16
+and 16x20; quasi-static on 8x10); one more rung repeats the reference on 2 MPI ranks (the
+round-off floor, below).
 
-**Reference** = the rung marked ``"reference": True``: the finest setting, 24x30 quadratic
-mesh with Newmark dt = 0.005 s (``--quick``: 16x20, dt = 0.005 s, around the 8x10 default).
+**Reference** = the rung marked ``"reference": True``: the finest setting, the explicit run
+on a 32x40 quadratic mesh (``--quick``: implicit 16x20, dt = 0.005 s, around the 8x10
+default; session 7 found that reference 11-14 % from the explicit 24x30 curve, i.e. not
+mesh-converged, which is why the full ladder's reference is the explicit 32x40 run: the
+implicit path does not reach 57 degrees on 24x30 in useful time).
 
 **Round-off floor.** The scene is sensitive to round-off: the same default scene run
 serially and under ``mpirun -n 2`` differed by 3.3 % (raw relative L2 over 2-40 deg) and
@@ -109,8 +113,7 @@ BASE: dict[str, Any] = {
     "mesh.n_around": 16,
     "mesh.n_along": 20,
     "mesh.order": 2,
-    "solver.integrator": "newmark",
-    "solver.dt": 0.01,
+    "solver.integrator": "explicit",
 }
 RUNG_KEYS = ("name", "reference", "floor", "ranks")  # rung keys that are not scene keys
 
@@ -123,22 +126,31 @@ def floor_rung(rung: dict[str, Any], ranks: int = 2) -> dict[str, Any]:
 
 
 MESH24: dict[str, Any] = {"mesh.n_around": 24, "mesh.n_along": 30}
-REF: dict[str, Any] = {"name": "ref24x30_dt0.005", "reference": True, **MESH24, "solver.dt": 0.005}
+NEWMARK: dict[str, Any] = {"solver.integrator": "newmark", "solver.dt": 0.01}
+REF: dict[str, Any] = {
+    "name": "ref32x40",
+    "reference": True,
+    "mesh.n_around": 32,
+    "mesh.n_along": 40,
+}
 LADDER: list[dict[str, Any]] = [
-    {"name": "mesh8x10", "mesh.n_around": 8, "mesh.n_along": 10},
-    {"name": "mesh12x16", "mesh.n_around": 12, "mesh.n_along": 16},
-    {"name": "base16x20"},  # = BASE: mesh 16x20, order 2, newmark dt 0.01
-    {"name": "mesh24x30", "mesh.n_around": 24, "mesh.n_along": 30},
+    # explicit (central difference + FILM contact, dt = 0.9 dt_crit): the mesh
+    {"name": "explicit8x10", "mesh.n_around": 8, "mesh.n_along": 10},
+    {"name": "explicit12x16", "mesh.n_around": 12, "mesh.n_along": 16},
+    {"name": "base16x20"},  # = BASE: mesh 16x20, order 2, explicit
+    {"name": "explicit24x30", **MESH24},
+    # the time step (half the base's), the geometry order, the element order
+    {"name": "safety0.45", "solver.safety": 0.45},
     {"name": "order1", "mesh.order": 1},
-    # element order: degree-1 u and theta on the mesh with the base's node count
+    # degree-1 u and theta on the mesh with the base's node count
     {"name": "degree1_32x40", "element.degree": 1, "mesh.n_around": 32, "mesh.n_along": 40},
-    {"name": "dt0.02", "solver.dt": 0.02},
-    {"name": "dt0.005", "solver.dt": 0.005},
-    {"name": "static", "solver.integrator": "static"},
-    {"name": "explicit16x20", "solver.integrator": "explicit"},
-    {"name": "explicit24x30", "solver.integrator": "explicit", **MESH24},
+    # implicit: Newmark (gamma 0.6) + Lagrange-multiplier contact, dt 0.01 s; quasi-static
+    {"name": "newmark8x10", **NEWMARK, "mesh.n_around": 8, "mesh.n_along": 10},  # default scene
+    {"name": "newmark12x16", **NEWMARK, "mesh.n_around": 12, "mesh.n_along": 16},
+    {"name": "newmark16x20", **NEWMARK},
+    {"name": "static8x10", "solver.integrator": "static", "mesh.n_around": 8, "mesh.n_along": 10},
     REF,
-    floor_rung(REF),  # ref24x30_dt0.005_np2: the reference on 2 ranks (round-off floor)
+    floor_rung(REF),  # ref32x40_np2: the reference on 2 ranks (round-off floor)
 ]
 QUICK_REF: dict[str, Any] = {
     "name": "ref16x20_dt0.005",
