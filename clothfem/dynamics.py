@@ -1207,6 +1207,8 @@ def integrate_explicit(
     K0 = _initial_K0(s, x, damping)
     r, fe = x.duplicate(), x.duplicate()
 
+    singular = [False]  # a lumped rotary block was singular on this rank
+
     def accel(x, vpred, lam, a) -> None:
         s.forces(x, lam, r, fe)  # state at x
         ra = -r.getArray(readonly=True)
@@ -1214,10 +1216,11 @@ def integrate_explicit(
             ra = ra - _damp(vpred)
         try:
             aa = s.lumped_solve(ra)
-        except np.linalg.LinAlgError as exc:
-            raise DynamicsDivergence(
-                "explicit: the lumped rotary mass became singular" + rotation_note(s)
-            ) from exc
+        except np.linalg.LinAlgError:
+            # rank-local: raising here would leave the other ranks waiting in the next
+            # collective call. NaN makes the (global) energy check below fail on every rank.
+            singular[0] = True
+            aa = np.full_like(ra, np.nan)
         rows, _ = s.bc(lam)
         aa[rows] = 0.0
         a.setArray(aa)
@@ -1280,6 +1283,11 @@ def integrate_explicit(
         if rebase is not None and isinstance(s, ShellSystem):
             s.rebase(x, v, a, threshold=rebase)
         if not math.isfinite(K + U):
+            if s.comm.allreduce(singular[0], op=MPI.LOR):
+                raise DynamicsDivergence(
+                    f"explicit: the lumped rotary mass became singular at t = {t:.6g}"
+                    + rotation_note(s)
+                )
             raise FloatingPointError(
                 f"explicit integration blew up at t = {t:.6g} (dt = {h:.4g})" + rotation_note(s)
             )

@@ -27,6 +27,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -465,10 +466,32 @@ def run_contact_scene(
                     snapshot(f"{inc:03d}")
             snapshot("final")
         finally:
-            comm.barrier()
+            _end_together(comm)
             if png and comm.rank == 0 and writer.csv_path.exists():
                 _torque_plot(writer.csv_path, out / "torque_angle.png", name)
     return out
+
+
+def _end_together(comm: MPI.Comm) -> None:
+    """The runners' ``finally``: wait for every rank before the closing writes, unless this
+    rank is leaving with an error the other ranks do not share. The solver stops and the
+    signal stop are decided on reduced values, so every rank raises them at the same point;
+    any other error (a bug, an I/O error, Ctrl-C) may be this rank's alone, and the others
+    would wait in their next collective call forever: under MPI it aborts the job instead
+    (the history rows already written are kept)."""
+    from .dynamics import DynamicsDivergence
+    from .run import RunStopped
+
+    exc = sys.exc_info()[1]
+    shared = (SolverDivergence, ContactDivergence, DynamicsDivergence, RunStopped, SceneError)
+    if comm.size > 1 and exc is not None and not isinstance(exc, shared):
+        sys.stderr.write(
+            f"clothfem: rank {comm.rank} stopped alone ({type(exc).__name__}: {exc}); "
+            "aborting the MPI job (rows written so far are kept)\n"
+        )
+        sys.stderr.flush()
+        comm.Abort(1)
+    comm.barrier()
 
 
 def _checkpoint(out: Path, comm: MPI.Comm, data: dict[str, Any]) -> None:
@@ -731,7 +754,7 @@ def _run_dynamic(
                 f"dynamic contact stopped at t = {dc.t:.6g} s ({angle_at(dc.t):.2f} deg): {exc}"
             ) from None
         finally:
-            comm.barrier()
+            _end_together(comm)
             if o["png"] and comm.rank == 0 and writer.csv_path.exists():
                 _torque_plot(writer.csv_path, out / "torque_angle.png", name)
     return out
@@ -933,7 +956,7 @@ def _run_explicit(
                 f"explicit run stopped at t = {t_stop:.6g} s ({angle_at(t_stop):.2f} deg): {exc}"
             ) from None
         finally:
-            comm.barrier()
+            _end_together(comm)
             if o["png"] and comm.rank == 0 and writer.csv_path.exists():
                 _torque_plot(writer.csv_path, out / "torque_angle.png", name)
     return out
