@@ -226,7 +226,7 @@ SCHEMA: dict[str, Section] = {
             "safety": Key(
                 "float",
                 "explicit: time step = safety x the stable step dt_crit of the central "
-                "difference at t = 0 (power iteration)",
+                "difference at t = 0 (Lanczos)",
                 default=0.9,
                 lo=0.0,
                 hi=1.0,

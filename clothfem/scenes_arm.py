@@ -816,10 +816,10 @@ def _run_explicit(
         state["pen"] = float(data["run_pen"])
         keep = state["row"]
     else:
-        st = stable_time_step(system, lam=load(0.0), iterations=300)
+        st = stable_time_step(system, lam=load(0.0), iterations=600)
         dt = sv["safety"] * st.dt_crit
     rank0_print(
-        f"  explicit: dt_crit {st.dt_crit:.4e} s (power iteration "
+        f"  explicit: dt_crit {st.dt_crit:.4e} s (Lanczos "
         f"{'converged' if st.converged else 'not converged'} in {st.iterations}), "
         f"dt {dt:.4e} s"
     )

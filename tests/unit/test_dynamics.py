@@ -241,8 +241,34 @@ def test_shell_stable_step_bounds(strip_system):
     st = dy.stable_time_step(strip_system, iterations=1000)
     assert 0 < st.dt_bound <= st.dt_crit < math.inf
     assert st.converged, st
+    assert st.iterations < 100, st  # Lanczos (the power iteration needed > 1000 here)
     with pytest.raises(ValueError, match="exceeds the stable estimate"):
         dy.integrate_explicit(strip_system, t_end=1.0, dt=1.01 * st.dt_crit, stable=st)
+
+
+@pytest.mark.serial
+def test_shell_stable_step_is_the_largest_generalised_eigenvalue():
+    """omega_max^2 of the Lanczos estimate = the largest eigenvalue of K v = w^2 M_L v on the
+    free rows by a dense solve (scipy.linalg.eigh), on a strip bent into a curved state."""
+    from scipy.linalg import eigh
+
+    sm = meshes.strip(COMM, length=1.0, width=0.3, nx=3, ny=2)
+    mat = FabricMaterial.isotropic(E=1.0e6, nu=0.3, rho=400.0)
+    model = ShellModel(sm, material=mat, thickness=0.01, supports=[Clamp("root")])
+    s = dy.ShellSystem(model, rotary_scale=10.0)
+    model.u.x.array[2::3] = 0.05 * model.x_nodes[:, 0] ** 2  # a curved (non-zero) state
+    model.u.x.scatter_forward()
+    st = dy.stable_time_step(s, rtol=1e-10, iterations=500)
+    x = s.create_vector()
+    s.get_state(x)
+    K = s.jacobian(x)
+    Kd = K.convert("dense").getDenseArray()
+    N = Kd.shape[0]
+    Md = np.column_stack([s.lumped_mult(np.eye(N)[:, j]) for j in range(N)])
+    free = np.setdiff1d(np.arange(N), s.bc(0.0)[0])
+    w2 = eigh(Kd[np.ix_(free, free)], Md[np.ix_(free, free)], eigvals_only=True)[-1]
+    assert st.converged
+    assert st.omega_max**2 == pytest.approx(w2, rel=1e-8)
 
 
 # ---------------------------------------------------------------------------- bad input
