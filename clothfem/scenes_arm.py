@@ -844,12 +844,17 @@ def _run_explicit(
     acc = {"tau": np.zeros(3), "res": np.zeros(3), "lam": 0.0, "n": 0, "pen": 0.0}
     xdmf_name = "fabric" if keep is None else f"fabric_resumed_{start['step']:06d}"
 
-    def touching_torque() -> np.ndarray:
+    def local_torque_and_resultant() -> tuple[np.ndarray, np.ndarray]:
+        """Eq. 28 torque about J and the contact resultant of this step over the owned nodes
+        (not reduced: the runner sums them over a row's steps and reduces once per row)."""
         f = fc.forces_on_body()
-        on = fc.contact_body() == k_torque
+        on = fc.contact_body() == k_torque if c["aj"] == "touching" else in_aj
         x = fc.X + model.u.x.array[: 3 * n].reshape(n, 3)
-        tau = joint_torque(x[on], f[on], J) if on.any() else np.zeros(3)
-        return comm.allreduce(tau, op=MPI.SUM)
+        if on is None:
+            tau = joint_torque(x, f, J)
+        else:
+            tau = joint_torque(x[on], f[on], J) if on.any() else np.zeros(3)
+        return np.asarray(tau, dtype=float), f.sum(axis=0)
 
     with ResultWriter(out, model, name=xdmf_name, keep_rows=keep) as writer:
 
@@ -867,8 +872,9 @@ def _run_explicit(
 
         def on_step(r) -> None:
             h = fc.history[-1]
-            acc["tau"] += touching_torque() if c["aj"] == "touching" else fc.torque(J, nodes=in_aj)
-            acc["res"] += fc.resultant()
+            tau_local, res_local = local_torque_and_resultant()
+            acc["tau"] += tau_local
+            acc["res"] += res_local
             acc["lam"] += h.sum_lambda
             acc["n"] += 1
             acc["pen"] = max(acc["pen"], h.max_penetration)
@@ -876,7 +882,9 @@ def _run_explicit(
                 return
             state["row"] += 1
             k = acc["n"]
-            tau, res = acc["tau"] / k, acc["res"] / k
+            sums = np.concatenate([acc["tau"], acc["res"]])
+            comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)  # one reduction per row
+            tau, res = sums[:3] / k, sums[3:] / k
             angle = angle_at(r.time)
             now = time.perf_counter()
             pen_after = max(0.0, -h.min_gap_after) if math.isfinite(h.min_gap_after) else 0.0
