@@ -251,6 +251,9 @@ class StableStep:
     converged: bool  # the largest Ritz value's residual bound is below rtol
 
 
+MAX_TURN = 1.0  # rad: largest director turn per explicit step before the run is stopped
+
+
 # ---------------------------------------------------------------------------- systems
 def _global_sum(comm, value: float) -> float:
     return comm.allreduce(float(value), op=MPI.SUM)
@@ -375,6 +378,12 @@ class ShellSystem:
             self._blocks = self.lumped_d[:, None, None] * np.einsum("nka,nkb->nab", T, T)
             self._blocks_at = th.copy()
         return self._blocks
+
+    def max_rotation(self) -> float:
+        """The largest nodal director rotation |theta| [rad] over all ranks (collective)."""
+        th = self.model.theta.x.array[: 2 * self.n].reshape(self.n, 2)
+        local = float(np.hypot(th[:, 0], th[:, 1]).max(initial=0.0))
+        return self.comm.allreduce(local, op=MPI.MAX)
 
     def rebase(self, x: PETSc.Vec, v: PETSc.Vec, a: PETSc.Vec, *, threshold: float) -> None:
         """Re-base the model's strongly rotated nodes (:meth:`ShellModel.rebase`) at the
@@ -551,9 +560,7 @@ def rotation_note(s) -> str:
     rotations pass pi without harm, so this explains failures rather than forbidding them."""
     if not isinstance(s, ShellSystem):
         return ""
-    n = s.n
-    th = s.model.theta.x.array[: 2 * n].reshape(n, 2)
-    worst = s.comm.allreduce(float(np.hypot(th[:, 0], th[:, 1]).max(initial=0.0)), op=MPI.MAX)
+    worst = s.max_rotation()
     if math.isfinite(worst) and abs(worst - math.pi) > 0.15 * math.pi:
         return ""
     return (
@@ -1308,6 +1315,18 @@ def integrate_explicit(
         s.commit(x)  # (free for the shell: accel() left its state at x)
         K, U, W, Wd, diss = energy.advance(xo, x, v, a, lam, h)
         if rebase is not None and isinstance(s, ShellSystem):
+            # every node starts the step at |theta| <= rebase: beyond rebase + MAX_TURN the
+            # step turned a director by more than MAX_TURN rad, which a stable step resolving
+            # the motion does not do. Stop here, before the rotation reaches the
+            # parametrisation's singularity at pi and the rotary mass turns singular.
+            turn = s.max_rotation()
+            if turn > rebase + MAX_TURN:
+                raise DynamicsDivergence(
+                    f"explicit: a director turned by >= {turn - rebase:.3g} rad in the step to "
+                    f"t = {t:.6g} s (dt = {h:.4g} s; dt_crit at the start {st.dt_crit:.4g} s): "
+                    "the step no longer resolves the motion (unstable: the current state's "
+                    "stable step is below dt; lower the safety factor)"
+                )
             s.rebase(x, v, a, threshold=rebase)
         if not math.isfinite(K + U):
             if s.comm.allreduce(singular[0], op=MPI.LOR):
