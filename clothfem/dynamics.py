@@ -224,6 +224,9 @@ class DynamicStep:
     damping_work: float  # cumulative
     dissipation: float  # numerical: W_ext - W_damp - (K + U - K0 - U0)
     wall_time: float
+    # explicit: (t_base, step_base, h, n_end), the clock t = t_base + (step - step_base) h
+    # up to step n_end after this step (to resume a run whose step shrank exactly)
+    clock: tuple[float, int, float, int] | None = None
 
     @property
     def total(self) -> float:
@@ -1182,8 +1185,11 @@ def integrate_explicit(
     first_step: int = 0,
     acceleration: PETSc.Vec | None = None,
     on_state: Callable[[DynamicStep, PETSc.Vec, PETSc.Vec], None] | None = None,
+    recheck_every: int = 0,
+    clock: tuple[float, int, float, int] | None = None,
 ) -> tuple[list[DynamicStep], StableStep]:
-    """Central difference (velocity Verlet) with the lumped mass, fixed step.
+    """Central difference (velocity Verlet) with the lumped mass, fixed step (or shrinking
+    with the state's stable step, ``recheck_every``).
 
     ``contact``: a :class:`clothfem.contact.film.FilmContact`; the contact-free predictor is
     corrected by forward-increment Lagrange multipliers (Eqs. 22-25) before the forces are
@@ -1196,11 +1202,20 @@ def integrate_explicit(
     (explicit; = v_n + dt a_n without contact).
     Prescribed rows follow their values; their velocity is the difference quotient.
 
+    ``recheck_every`` N > 0: after every step whose index is a multiple of N the stable step
+    of the current state is estimated again (:func:`stable_time_step`, Lanczos); if
+    ``safety`` x that is below the step in use, the step shrinks to it (the remaining span
+    is split evenly) and never grows back. A deforming shell's stable step can fall below
+    its value at t = 0 (the sleeve of docs/stiff_cases.md: to 0.85 x by t = 0.15 s, so 0.9
+    dt_crit(0) goes unstable). The step in use is each record's ``dt``.
+
     Restart: ``first_step`` k > 0 continues a run of the same ``t_end`` and ``dt`` from the
     end of its step k (t = k h), the model holding that state, with its ``velocity`` and
-    ``acceleration``; energies and work are then counted from there. ``on_state(record, v,
+    ``acceleration``; energies and work are then counted from there. After the step has
+    shrunk, also give ``clock`` = the ``clock`` of step k's record: the run continues with
+    the same steps and times (``dt`` is then not used). ``on_state(record, v,
     a)`` sees the velocity and acceleration after every step (e.g. to checkpoint them).
-    Returns (records, the stability estimate used).
+    Returns (records, the stability estimate at the start).
     """
     if check not in ("error", "warn", "off"):
         raise ValueError(f"check must be 'error', 'warn' or 'off', got {check!r}")
@@ -1237,6 +1252,10 @@ def integrate_explicit(
         warnings.warn(msg, stacklevel=2)
     if not (isinstance(first_step, int) and first_step >= 0):
         raise ValueError(f"first_step must be an integer >= 0, got {first_step!r}")
+    if not (isinstance(recheck_every, int) and recheck_every >= 0):
+        raise ValueError(f"recheck_every must be an integer >= 0, got {recheck_every!r}")
+    if clock is not None and not (len(clock) == 4 and clock[1] <= first_step < clock[3]):
+        raise ValueError(f"clock must be (t_base, step_base <= first_step, h, n_end), got {clock}")
     x, v = _start(s, velocity)
     K0 = _initial_K0(s, x, damping)
     r, fe = x.duplicate(), x.duplicate()
@@ -1270,11 +1289,17 @@ def integrate_explicit(
             out += damping.stiffness * tmp.getArray(readonly=True)
         return out
 
-    n_steps = max(1, math.ceil(t_end / dt - 1e-9))
-    h = t_end / n_steps
-    if first_step > n_steps:
-        raise ValueError(f"first_step {first_step} is past the last step {n_steps}")
-    lam = lam_of(first_step * h)
+    # the clock: t = t_base + (step - step_base) h up to step n_end (t = step h for a run
+    # that never shrank its step); a shrink re-bases it; ``clock`` restores it
+    if clock is None:
+        t_base, step_base = 0.0, 0
+        n_end = max(1, math.ceil(t_end / dt - 1e-9))
+        h = t_end / n_end
+        if first_step > n_end:
+            raise ValueError(f"first_step {first_step} is past the last step {n_end}")
+    else:
+        t_base, step_base, h, n_end = float(clock[0]), int(clock[1]), float(clock[2]), int(clock[3])
+    lam = lam_of(t_base + (first_step - step_base) * h)
     a = x.duplicate()
     accel(x, v, lam, a)  # also leaves the forces at x for the energy bookkeeping
     if acceleration is not None:
@@ -1285,9 +1310,27 @@ def integrate_explicit(
     s.commit(x)
     xo, vp = x.duplicate(), x.duplicate()
     records = []
-    for step in range(first_step + 1, n_steps + 1):
+    step = first_step
+    while step < n_end:
+        if recheck_every and step > 0 and step % recheck_every == 0:
+            # at the state after step `step` (an absolute index: a resumed run rechecks
+            # where the uninterrupted one did)
+            now = stable_time_step(s, lam=lam)
+            if safety * now.dt_crit < h:
+                t_base = t_base + (step - step_base) * h
+                step_base = step
+                n_rem = max(1, math.ceil((t_end - t_base) / (safety * now.dt_crit) - 1e-9))
+                h, n_end = (t_end - t_base) / n_rem, step + n_rem
+                log.info(
+                    "explicit: at t = %.6g s dt_crit = %.4e s (%.3f x at the start): dt %.4e s",
+                    t_base,
+                    now.dt_crit,
+                    now.dt_crit / st.dt_crit,
+                    h,
+                )
+        step += 1
         t0 = time.perf_counter()
-        t = step * h
+        t = t_base + (step - step_base) * h
         lam = lam_of(t)
         x.copy(xo)
         v.axpy(0.5 * h, a)  # v: the half-step velocity v_n+1/2 (leapfrog form of the update)
@@ -1314,6 +1357,15 @@ def integrate_explicit(
         a_new.destroy()
         s.commit(x)  # (free for the shell: accel() left its state at x)
         K, U, W, Wd, diss = energy.advance(xo, x, v, a, lam, h)
+        if not math.isfinite(K + U):
+            if s.comm.allreduce(singular[0], op=MPI.LOR):
+                raise DynamicsDivergence(
+                    f"explicit: the lumped rotary mass became singular at t = {t:.6g}"
+                    + rotation_note(s)
+                )
+            raise FloatingPointError(
+                f"explicit integration blew up at t = {t:.6g} (dt = {h:.4g})" + rotation_note(s)
+            )
         if rebase is not None and isinstance(s, ShellSystem):
             # every node starts the step at |theta| <= rebase: beyond rebase + MAX_TURN the
             # step turned a director by more than MAX_TURN rad, which a stable step resolving
@@ -1328,17 +1380,9 @@ def integrate_explicit(
                     "stable step is below dt; lower the safety factor)"
                 )
             s.rebase(x, v, a, threshold=rebase)
-        if not math.isfinite(K + U):
-            if s.comm.allreduce(singular[0], op=MPI.LOR):
-                raise DynamicsDivergence(
-                    f"explicit: the lumped rotary mass became singular at t = {t:.6g}"
-                    + rotation_note(s)
-                )
-            raise FloatingPointError(
-                f"explicit integration blew up at t = {t:.6g} (dt = {h:.4g})" + rotation_note(s)
-            )
+        wall = time.perf_counter() - t0
         rec = DynamicStep(
-            step, t, h, lam, 0, 0.0, 0.0, 0, K, U, W, Wd, diss, time.perf_counter() - t0
+            step, t, h, lam, 0, 0.0, 0.0, 0, K, U, W, Wd, diss, wall, (t_base, step_base, h, n_end)
         )
         records.append(rec)
         if on_step is not None:

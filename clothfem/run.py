@@ -174,8 +174,13 @@ def _inertia_log(sv: dict[str, Any]) -> str:
         return "inertia: not built (static integrator)"
     if sv["integrator"] == "explicit":
         return (
-            f"inertia: lumped mass, central difference, dt = {sv['safety']:g} x dt_crit, "
-            f"rotary inertia x {sv['rotary_scale']:g}"
+            f"inertia: lumped mass, central difference, dt = {sv['safety']:g} x dt_crit"
+            + (
+                f" (re-estimated every {sv['recheck_every']} steps)"
+                if sv["recheck_every"]
+                else " (at t = 0)"
+            )
+            + f", rotary inertia x {sv['rotary_scale']:g}"
         )
     return (
         f"inertia: consistent mass, Newmark gamma {sv['gamma']:g}, dt {sv['dt']:g} s, "

@@ -232,6 +232,13 @@ SCHEMA: dict[str, Section] = {
                 hi=1.0,
                 open_lo=True,
             ),
+            "recheck_every": Key(
+                "int",
+                "explicit: re-estimate the stable step every N steps and shrink the step to "
+                "safety x it when smaller (0: never; the step stays safety x dt_crit at t = 0)",
+                default=0,
+                lo=0,
+            ),
             "steps": Key("int", "static: initial number of load steps", default=10, lo=1),
             "min_increment": Key("float", "static: smallest load increment", default=1e-4, **POS),
             "max_increment": Key(

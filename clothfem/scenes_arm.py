@@ -794,7 +794,7 @@ def _run_explicit(
     system = ShellSystem(model, rotary_scale=sv["rotary_scale"])
     load = (lambda t: min(t / t_ramp, 1.0)) if t_ramp > 0 else (lambda t: 1.0)
     state = {"row": 0, "pen": 0.0, "snap": 0, "contact_wall": 0.0, "t_row": time.perf_counter()}
-    start: dict[str, Any] = {"step": 0, "v": None, "a": None}
+    start: dict[str, Any] = {"step": 0, "v": None, "a": None, "clock": None}
     keep = None
     if resume:
         data = _load_checkpoint(out, comm)
@@ -812,6 +812,10 @@ def _run_explicit(
         )
         dt = float(data["dt"])
         start["step"] = int(data["run_step"])
+        if "run_clock_h" in data:  # the step had shrunk: continue its clock
+            keys = ("t_base", "step_base", "h", "n_end")
+            c0 = [data[f"run_clock_{k}"] for k in keys]
+            start["clock"] = (float(c0[0]), int(c0[1]), float(c0[2]), int(c0[3]))
         state.update(row=int(data["run_row"]), snap=int(data["run_snap"]))
         state["pen"] = float(data["run_pen"])
         keep = state["row"]
@@ -862,6 +866,9 @@ def _run_explicit(
             if not state.pop("checkpoint", False):
                 return
             run = {"run_step": r.step, "run_row": state["row"], "run_snap": state["snap"]}
+            if r.clock is not None and r.clock[1] > 0:  # the step shrank: save its clock
+                keys = ("t_base", "step_base", "h", "n_end")
+                run.update({f"run_clock_{k}": val for k, val in zip(keys, r.clock, strict=True)})
             run.update(run_pen=state["pen"], contact_dissipation=fc.dissipation_total, dt=dt)
             run.update({f"st_{k}": getattr(st, k) for k in StableStep.__dataclass_fields__})
             model_data = {f"model_{k}": val for k, val in model.state_arrays().items()}
@@ -951,6 +958,9 @@ def _run_explicit(
                 on_step=on_step,
                 stable=st,
                 contact=fc,
+                safety=sv["safety"],
+                recheck_every=sv["recheck_every"],
+                clock=start["clock"],
                 first_step=start["step"],
                 velocity=start["v"],
                 acceleration=start["a"],

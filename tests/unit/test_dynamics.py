@@ -202,6 +202,36 @@ def test_divergence_below_dt_min_keeps_records():
     assert [r.step for r in seen] == [1, 2, 3, 4, 5]
 
 
+@pytest.mark.parametrize("recheck", [0, 5])
+def test_explicit_recheck_shrinks_the_step_when_the_system_stiffens(recheck):
+    """m x'' + k x = 0 with k x4 after step 10 (omega 1 -> 2, dt_crit 2 -> 1 s): the step
+    0.9 dt_crit(0) = 1.8 s is then unstable (|amplification| > 1) and the energy grows by
+    orders of magnitude; with recheck_every = 5 the step shrinks to 0.9 x the new dt_crit at
+    step 10 and the energy stays bounded: near the limit K + U of the central difference
+    swings between E* (1 - (omega h / 2)^2) and E* (E* its conserved modified energy), a
+    ratio of 1 / (1 - 0.9^2) = 5.3 at h = 0.9 dt_crit, so 6 bounds it."""
+    s = _sdof(k=1.0, m=1.0)
+    t_end = 120.0
+    energy = {}
+
+    def on_step(r):
+        if r.step == 10:
+            s.K.scale(4.0)
+        if r.step >= 11:
+            energy.setdefault("after", r.kinetic + r.strain)
+            energy["max"] = max(energy.get("max", 0.0), r.kinetic + r.strain)
+
+    recs, st = dy.integrate_explicit(s, t_end=t_end, on_step=on_step, recheck_every=recheck)
+    assert st.dt_crit == pytest.approx(2.0, rel=1e-12)
+    assert recs[-1].time == pytest.approx(t_end, rel=1e-12)
+    assert all(r.dt == pytest.approx(t_end / math.ceil(t_end / 1.8), rel=1e-12) for r in recs[:10])
+    if recheck:
+        assert all(r.dt <= 0.9 * 1.0 * (1 + 1e-9) for r in recs[10:])
+        assert energy["max"] <= 6.0 * energy["after"]
+    else:
+        assert energy["max"] > 1e6 * energy["after"]
+
+
 # ---------------------------------------------------------------------------- shell inertia
 @pytest.fixture(scope="module")
 def strip_system():

@@ -150,14 +150,24 @@ EXPLICIT_SETS = [
 ]
 
 
-def test_explicit_resume_after_sigterm_reproduces_the_history(tmp_path):
+@pytest.mark.parametrize("recheck", [0, 20])
+def test_explicit_resume_after_sigterm_reproduces_the_history(tmp_path, recheck):
     """The explicit run (central difference + FILM) checkpoints every 2 rows; stopped by
     SIGTERM and resumed, it gives the uninterrupted rows (the state, velocity, acceleration
-    and step size are restored, so the same steps follow)."""
-    _run(tmp_path / "reference", scene_sets=EXPLICIT_SETS)
+    and step size are restored, so the same steps follow). With solver.recheck_every = 20
+    the step shrinks at t = 0.0476 s (row 12 of 26, before the checkpoint the resumed run
+    starts from), so the resume continues with the shrunk step and its clock."""
+    sets = [*EXPLICIT_SETS, f"solver.recheck_every={recheck}"]
+    _run(tmp_path / "reference", scene_sets=sets)
     reference = _rows(tmp_path / "reference")
     assert math.isclose(float(reference[-1]["angle_deg"]), 3.0)
-    rows = _interrupt_and_resume(reference, tmp_path / "interrupted", EXPLICIT_SETS)
+    dts = [float(r["dt"]) for r in reference]
+    if recheck:
+        first = next(i for i, d in enumerate(dts) if d < dts[0])
+        assert first < len(reference) // 2 - 1 and min(dts) < dts[0]
+    else:
+        assert len(set(dts)) == 1
+    rows = _interrupt_and_resume(reference, tmp_path / "interrupted", sets)
     for a, b in zip(reference, rows, strict=True):
         for key in ("time", "angle_deg", "torque_x", "torque_y", "torque_z", "n_active"):
             assert float(b[key]) == pytest.approx(float(a[key]), rel=1e-10, abs=1e-14), key
