@@ -416,7 +416,7 @@ def main() -> int:
         stable = dy.stable_time_step(system, lam=1.0, iterations=5000)
         rank0_print(
             f"== {label}: T1 = {T1:.4g} s, dt_crit = {stable.dt_crit:.4g} s "
-            f"({stable.iterations} power its, converged {stable.converged}), "
+            f"({stable.iterations} Lanczos its, converged {stable.converged}), "
             f"Gershgorin {stable.dt_bound:.3g} s, t_end = {t_end} s, "
             f"setup {time.perf_counter() - t0:.1f} s"
         )
