@@ -43,6 +43,7 @@ import statistics
 import sys
 import time
 import traceback
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -115,11 +116,15 @@ def build(E: float, t: float, n_around: int, n_along: int, cuff: bool = True) ->
     )
 
 
+_REFERENCE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # model -> state at build
+
+
 def reset(model: ShellModel) -> None:
-    zero = model.create_vector()
-    zero.set(0.0)
-    model.set_state(zero)
-    zero.destroy()
+    """Back to the reference state: u = theta = 0 and the nodal fibre bases of the reference
+    (a run re-bases them; zeroing u and theta alone left the next run of the same model
+    starting from the previous run's directors: fixed in session 8)."""
+    ref = _REFERENCE.setdefault(model, model.state_arrays())
+    model.restore_arrays({k: v.copy() for k, v in ref.items()})
 
 
 def lowest_period(system: dy.ShellSystem, iterations: int = 40) -> float:
@@ -411,6 +416,7 @@ def main() -> int:
     for label, E, t, t_end, cuff in cases:
         t0 = time.perf_counter()
         model = build(E, t, args.n_around, args.n_along, cuff)
+        reset(model)  # records its reference state
         system = dy.ShellSystem(model)
         T1 = lowest_period(system)
         stable = dy.stable_time_step(system, lam=1.0, iterations=5000)
