@@ -339,7 +339,7 @@ def floor_line(rows: list[dict], floor: dict[str, float]) -> str:
         return f"round-off floor: not measured ({why}); no threshold is flagged"
     ranks = ", ".join(str(r.get("ranks", "?")) for r in rows if _is_floor(r))
     parts = [
-        f"F = {100 * floor[key]:.2f} % ({norm})"
+        f"F = {100 * floor[key]:.3g} % ({norm})"
         if math.isfinite(floor.get(key, math.nan))
         else f"not measured ({norm})"
         for key, norm in NORMS
@@ -372,7 +372,7 @@ def cheapest(rows: list[dict], ref: str, floor: dict[str, float] | None = None) 
             head = f"within {100 * tol:g} % ({norm}): "
             f = floor.get(key, math.nan)
             flag = (
-                f" (below the round-off floor F = {100 * f:.2f} %: differences this small are"
+                f" (below the round-off floor F = {100 * f:.3g} %: differences this small are"
                 " not resolved)"
                 if math.isfinite(f) and tol < f
                 else ""
@@ -440,7 +440,7 @@ def plot(
                 color=styles[key]["color"],
                 lw=1.0,
                 ls="--",
-                label=f"round-off floor, {key}: {100 * f:.2f} %",
+                label=f"round-off floor, {key}: {100 * f:.3g} %",
             )
     ref_row = next((r for r in rows if r["case"] == ref), None)
     if ref_row is not None and math.isfinite(ref_row["wall_s"]):

@@ -201,8 +201,8 @@ def test_floor_errors_and_flags(tmp_path):
 
     text = L.floor_line(rows, floor)
     assert text.startswith("round-off floor (ref_np2: the reference's settings on 2 MPI ranks")
-    assert f"F = {100 * raw:.2f} % (raw)" in text
-    assert f"F = {100 * smooth:.2f} % (2-deg moving average)" in text
+    assert f"F = {100 * raw:.3g} % (raw)" in text
+    assert f"F = {100 * smooth:.3g} % (2-deg moving average)" in text
 
 
 def test_floor_never_chosen_even_if_alone(tmp_path):
@@ -255,7 +255,7 @@ def test_main_writes_floor_to_md_and_png(tmp_path, monkeypatch, capsys):
     raw, smooth = analytic_floor()
     assert f"compared over [{L.LO:g}, {HI:g}] deg (A given by --angle)" in md
     for text in (printed, md):
-        assert f"F = {100 * raw:.2f} % (raw)" in text
+        assert f"F = {100 * raw:.3g} % (raw)" in text
         assert "within 2 % (raw): off1.5" in text
         assert text.count("below the round-off floor") == 3
     assert (out / "ladder.png").stat().st_size > 0
