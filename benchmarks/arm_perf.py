@@ -17,6 +17,12 @@ MUMPS's distributed LU (``-contact_lagrange_pc_type lu``). Writes `OUT/arm_perf.
 `OUT/arm_perf.md`.
 
     .venv/bin/python benchmarks/arm_perf.py --out results/arm-perf [--meshes 8x10 16x20]
+    .venv/bin/python benchmarks/arm_perf.py --integrator explicit --meshes 16x20 32x40 \
+        --angle 10 --out results/arm-perf-explicit
+
+With ``--integrator explicit`` (central difference + FILM: no linear solve) the split is
+contact / io / other (other = the explicit step itself: forces, lumped solve, the
+predictor) and there is one 2-rank run per mesh.
 """
 
 import argparse
@@ -37,9 +43,10 @@ PARTS = ("t_assembly", "t_contact", "t_solve", "t_io")
 SOLVES = {"redundant": [], "distributed": ["-contact_lagrange_pc_type", "lu"]}
 
 
-def run(out: Path, mesh: str, angle: float, ranks: int, solve: str) -> dict:
+def run(out: Path, mesh: str, angle: float, ranks: int, solve: str, integrator: str) -> dict:
     na, nl = mesh.split("x")
     sets = [
+        f"solver.integrator={integrator}",
         f"mesh.n_around={na}",
         f"mesh.n_along={nl}",
         "solver.settle_time=0.05",
@@ -49,7 +56,7 @@ def run(out: Path, mesh: str, angle: float, ranks: int, solve: str) -> dict:
     ]
     cmd = [sys.executable, "-m", "clothfem.cli", "run", str(SCENE), "--out", str(out)]
     cmd += [a for s in sets for a in ("--set", s)]
-    cmd += SOLVES[solve]
+    cmd += SOLVES[solve] if integrator == "newmark" else []
     if ranks > 1:
         mpi = ["mpirun", "--allow-run-as-root", "--oversubscribe", "-n", str(ranks)]
         cmd = [*mpi, sys.executable, "-m", "mpi4py", *cmd[1:]]
@@ -59,16 +66,19 @@ def run(out: Path, mesh: str, angle: float, ranks: int, solve: str) -> dict:
     h, s = read_history(out / "history.csv"), read_summary(out)
     wall = float(s.get("wall_time", h["elapsed"][-1]))
     row = {"mesh": mesh, "ranks": ranks, "solve": solve if ranks > 1 else "serial"}
+    if integrator == "explicit":  # no linear solves: the 2-rank row has no solve variant
+        row["solve"] = "explicit" + ("" if ranks > 1 else ", serial")
     row |= {"exit": res.returncode, "wall_s": wall}
-    row["steps"] = len(h["time"])
-    row["newton"] = int(h["newton_iterations"].sum())
+    row["steps"] = int(s.get("steps", len(h["time"])))
+    row["newton"] = int(h["newton_iterations"].sum()) if "newton_iterations" in h else 0
     row["final_angle"] = float(h["angle_deg"][-1])
-    parts = {p: float(h[p].sum()) for p in PARTS}
+    parts = {p: float(h[p].sum()) if p in h else 0.0 for p in PARTS}
     for p in PARTS:
         row[p[2:] + "_s"] = parts[p]
         row[p[2:] + "_pct"] = 100 * parts[p] / wall
     row["other_pct"] = 100 * (wall - sum(parts.values())) / wall
-    row["ms_per_newton"] = 1000 * wall / max(row["newton"], 1)
+    row["ms_per_newton"] = 1000 * wall / max(row["newton"], 1) if row["newton"] else 0.0
+    row["ms_per_step"] = 1000 * wall / max(row["steps"], 1)
     return row
 
 
@@ -77,26 +87,35 @@ def main() -> None:
     ap.add_argument("--out", default="results/arm-perf")
     ap.add_argument("--meshes", nargs="+", default=["8x10", "16x20"])
     ap.add_argument("--angle", type=float, default=5.0, help="flexion of the short run [deg]")
+    ap.add_argument(
+        "--integrator",
+        choices=("newmark", "explicit"),
+        default="newmark",
+        help="solver.integrator (explicit: no linear solve, one 2-rank run per mesh)",
+    )
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     for mesh in args.meshes:
-        one = run(out / f"{mesh}_np1", mesh, args.angle, 1, "redundant")
+        one = run(out / f"{mesh}_np1", mesh, args.angle, 1, "redundant", args.integrator)
         rows.append(one)
-        for solve in SOLVES:
-            two = run(out / f"{mesh}_np2_{solve}", mesh, args.angle, 2, solve)
+        solves = list(SOLVES) if args.integrator == "newmark" else ["redundant"]
+        for solve in solves:
+            two = run(out / f"{mesh}_np2_{solve}", mesh, args.angle, 2, solve, args.integrator)
             two["speedup"] = one["wall_s"] / two["wall_s"]
-            two["speedup_per_newton"] = one["ms_per_newton"] / two["ms_per_newton"]
+            if one["newton"] and two["newton"]:
+                two["speedup_per_newton"] = one["ms_per_newton"] / two["ms_per_newton"]
             rows.append(two)
-        for r in rows[-3:]:
+        for r in rows[-(1 + len(solves)) :]:
             print({k: round(v, 3) if isinstance(v, float) else v for k, v in r.items()}, flush=True)
     keys = list(dict.fromkeys(k for r in rows for k in r))
     with open(out / "arm_perf.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
         w.writerows(rows)
-    cols = ["mesh", "ranks", "solve", "wall_s", "steps", "newton", "ms_per_newton", "assembly_pct"]
+    cols = ["mesh", "ranks", "solve", "wall_s", "steps", "newton", "ms_per_newton", "ms_per_step"]
+    cols += ["assembly_pct"]
     cols += ["contact_pct", "solve_pct", "io_pct", "other_pct", "speedup", "speedup_per_newton"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
