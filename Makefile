@@ -4,6 +4,9 @@ PY := .venv/bin/python
 # One BLAS/OpenMP thread per MPI rank: 2 ranks on 2 cores.
 export OPENBLAS_NUM_THREADS := 1
 export OMP_NUM_THREADS := 1
+# One OpenBLAS kernel set on every x86-64 machine (the CPU-chosen kernels change round-off,
+# and two contact tests are sensitive to it: docs/parallel.md, found session 9)
+export OPENBLAS_CORETYPE := Sandybridge
 MPIRUN := mpirun --allow-run-as-root --oversubscribe -n 2
 OUT ?= results
 

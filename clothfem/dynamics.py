@@ -347,17 +347,9 @@ class ShellSystem:
         self.model.residual(x, f)
 
     def forces(self, x: PETSc.Vec, lam: float, r: PETSc.Vec, fe: PETSc.Vec) -> None:
-        """r = f_int - f_ext and fe = f_ext at (x, lam); every load is linear in lam."""
-        if lam == 0.0:  # unloaded: one assembly
-            self.set_load(0.0)
-            self.model.residual(x, r)
-            fe.set(0.0)
-            return
-        self.set_load(0.0)
-        self.model.residual(x, fe)  # f_int
+        """r = f_int - f_ext and fe = f_ext at (x, lam) (one internal-force assembly)."""
         self.set_load(lam)
-        self.model.residual(x, r)
-        fe.axpy(-1.0, r)
+        self.model.forces(x, r, fe)
 
     def jacobian(self, x: PETSc.Vec, K: PETSc.Mat | None = None) -> PETSc.Mat:
         return self.model.jacobian(x, K)
@@ -382,7 +374,7 @@ class ShellSystem:
         n = self.n
         th = self.model.theta.x.array[: 2 * n]
         if self._blocks is None or not np.array_equal(th, self._blocks_at):
-            T, _ = rotation.director_derivatives(self.model.basis[:n], th.reshape(n, 2))
+            T = self.model.director_jacobian()
             self._blocks = self.lumped_d[:, None, None] * np.einsum("nka,nkb->nab", T, T)
             self._blocks_at = th.copy()
         return self._blocks
@@ -1382,7 +1374,8 @@ def integrate_explicit(
                     "parametrisation (an unstable step, e.g. the state's stable step fell "
                     "below dt: lower solver.safety or set solver.recheck_every)"
                 )
-            s.rebase(x, v, a, threshold=rebase)
+            if turn > rebase:  # (same on every rank)
+                s.rebase(x, v, a, threshold=rebase)
         wall = time.perf_counter() - t0
         rec = DynamicStep(
             step, t, h, lam, 0, 0.0, 0.0, 0, K, U, W, Wd, diss, wall, (t_base, step_base, h, n_end)

@@ -845,7 +845,7 @@ def _run_explicit(
     pressure.name = "contact_pressure"  # Pa, nodal (lam / reference lumped area), last step
     model.u.name = "displacement"
     interval = o["interval"]
-    acc = {"tau": np.zeros(3), "res": np.zeros(3), "lam": 0.0, "n": 0, "pen": 0.0}
+    acc = {"tau": np.zeros(3), "res": np.zeros(3), "n": 0}
     xdmf_name = "fabric" if keep is None else f"fabric_resumed_{start['step']:06d}"
 
     def local_torque_and_resultant() -> tuple[np.ndarray, np.ndarray]:
@@ -878,15 +878,13 @@ def _run_explicit(
             )
 
         def on_step(r) -> None:
-            h = fc.history[-1]
             tau_local, res_local = local_torque_and_resultant()
             acc["tau"] += tau_local
             acc["res"] += res_local
-            acc["lam"] += h.sum_lambda
             acc["n"] += 1
-            acc["pen"] = max(acc["pen"], h.max_penetration)
             if r.time < (state["row"] + 1) * interval - 1e-12 and r.time < t_end - 1e-12:
                 return
+            h = fc.collect()  # the contact diagnostics of the row's steps (collective)
             state["row"] += 1
             k = acc["n"]
             sums = np.concatenate([acc["tau"], acc["res"]])
@@ -912,8 +910,8 @@ def _run_explicit(
                 **_torque_columns(tau, res, hinge_axis),
                 "n_active": h.active,
                 "max_penetration": pen_after,
-                "predictor_penetration": acc["pen"],
-                "sum_lam": acc["lam"] / k,
+                "predictor_penetration": h.max_penetration,
+                "sum_lam": h.sum_lambda,
                 "n_stick": h.n_stick,
                 "n_slip": h.active - h.n_stick,
                 "substeps": k,
@@ -929,7 +927,7 @@ def _run_explicit(
             writer.append_row(row)
             every = o["checkpoint_every"]
             state["checkpoint"] = bool(every) and state["row"] % every == 0
-            acc.update(tau=np.zeros(3), res=np.zeros(3), lam=0.0, n=0, pen=0.0)
+            acc.update(tau=np.zeros(3), res=np.zeros(3), n=0)
             summary.update(
                 final_angle_deg=angle,
                 time=r.time,
@@ -968,7 +966,7 @@ def _run_explicit(
             )
             snapshot("final", t_end)
         except (DynamicsDivergence, FloatingPointError) as exc:
-            t_stop = fc.history[-1].time if fc.history else 0.0
+            t_stop = fc.time
             snapshot(f"stopped_{angle_at(t_stop):04.1f}deg", t_stop)
             raise SolverDivergence(
                 f"explicit run stopped at t = {t_stop:.6g} s ({angle_at(t_stop):.2f} deg): {exc}"

@@ -59,15 +59,17 @@ class FilmParameters:
 
 @dataclass(frozen=True)
 class FilmRecord:
-    """Contact diagnostics of one explicit step (reduced over ranks)."""
+    """Contact diagnostics of the explicit steps since the previous
+    :meth:`FilmContact.collect` (a window of ``steps`` steps), reduced over ranks."""
 
-    time: float
-    active: int  # nodes corrected this step
-    max_penetration: float  # of the predictor [m] (>= 0)
-    sum_lambda: float  # sum of normal multipliers [N]
-    min_gap_after: float  # smallest gap after correction [m]
-    n_stick: int  # corrected nodes that stick (all of them if mu is None)
-    dissipation: float  # frictional dissipation of the step [J]
+    time: float  # of the window's last step [s]
+    steps: int  # explicit steps in the window
+    active: int  # nodes corrected in the last step
+    max_penetration: float  # largest predictor penetration in the window [m] (>= 0)
+    sum_lambda: float  # sum of the normal multipliers, mean over the window's steps [N]
+    min_gap_after: float  # smallest gap after correction in the window [m]
+    n_stick: int  # corrected nodes that stick in the last step (all of them if mu is None)
+    dissipation: float  # frictional dissipation of the window [J]
 
 
 def body_state(body) -> BodiesAt:
@@ -96,8 +98,10 @@ class FilmContact:
         self.X = self.model.x_nodes[:n]
         self.mass = np.asarray(system.lumped_u[0 : 3 * n : 3])  # kg per node
         self.last: FilmResult | None = None
-        self.history: list[FilmRecord] = []
-        self.dissipation_total = 0.0  # frictional dissipation since the start [J]
+        self.history: list[FilmRecord] = []  # one record per collect()
+        self.dissipation_total = 0.0  # frictional dissipation up to the last collect() [J]
+        self.time = 0.0  # of the last corrected step [s]
+        self._window = self._empty_window()
         self.wall = 0.0  # seconds spent in the contact corrections
         self._free = np.ones(n, dtype=bool)
 
@@ -127,34 +131,54 @@ class FilmContact:
         )
         u[free] = res.x - self.X[free]
         self.last = res
+        # rank-local diagnostics, reduced once per window by collect() (no collective call
+        # in the step: the explicit step's other reductions set the pace)
+        w = self._window
+        w["steps"] += 1
+        w["local"][:] = (res.active.sum(), (res.active & res.stick).sum())
+        w["lam"] += float(res.lam_n.sum())
+        w["diss"] += float(res.dissipation.sum())
         # predictor penetration of each corrected node: lambda dt^2 / m (Eq. 24)
         pen = float(np.max(res.lam_n * h * h / self.mass[free], initial=0.0))
-        gap_after = float(np.min(res.gap, initial=np.inf))
-        sums = np.array(
-            [
-                res.active.sum(),
-                (res.active & res.stick).sum(),
-                res.lam_n.sum(),
-                res.dissipation.sum(),
-            ],
-            dtype=float,
-        )
-        peaks = np.array([pen, -gap_after])
+        w["peaks"][0] = max(w["peaks"][0], pen)
+        w["peaks"][1] = max(w["peaks"][1], -float(np.min(res.gap, initial=np.inf)))
+        self.time = t
+        self.wall += time.perf_counter() - t0
+
+    @staticmethod
+    def _empty_window() -> dict:
+        return {
+            "steps": 0,
+            "local": np.zeros(2),
+            "lam": 0.0,
+            "diss": 0.0,
+            "peaks": np.array([0.0, -np.inf]),
+        }
+
+    def collect(self) -> FilmRecord:
+        """Reduce the diagnostics of the steps since the previous call over ranks, append
+        them to :attr:`history` and return them (collective; at least one step)."""
+        w = self._window
+        if w["steps"] == 0:
+            raise RuntimeError("FilmContact.collect: no contact step since the last collect")
+        sums = np.concatenate([w["local"], [w["lam"], w["diss"]]])
         self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+        peaks = w["peaks"].copy()
         self.comm.Allreduce(MPI.IN_PLACE, peaks, op=MPI.MAX)
         self.dissipation_total += float(sums[3])
-        self.history.append(
-            FilmRecord(
-                t,
-                int(sums[0]),
-                float(peaks[0]),
-                float(sums[2]),
-                float(-peaks[1]),
-                int(sums[1]),
-                float(sums[3]),
-            )
+        rec = FilmRecord(
+            time=self.time,
+            steps=w["steps"],
+            active=int(sums[0]),
+            max_penetration=float(peaks[0]),
+            sum_lambda=float(sums[2]) / w["steps"],
+            min_gap_after=float(-peaks[1]),
+            n_stick=int(sums[1]),
+            dissipation=float(sums[3]),
         )
-        self.wall += time.perf_counter() - t0
+        self.history.append(rec)
+        self._window = self._empty_window()
+        return rec
 
     def correct_velocities(self, v: PETSc.Vec) -> None:
         """Post-impact half-step velocities of the nodes corrected in this step (in place)."""

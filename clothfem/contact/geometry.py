@@ -154,9 +154,13 @@ def check_ellipsoid(
     return c, Q, r
 
 
-def _check_bodies(
-    bodies: Sequence[EllipsoidData],
-) -> list[tuple[FloatArray, FloatArray, FloatArray]]:
+class _CheckedBodies(tuple):
+    """Ellipsoids that passed :func:`_check_bodies` (not checked again when passed on)."""
+
+
+def _check_bodies(bodies: Sequence[EllipsoidData]) -> _CheckedBodies:
+    if isinstance(bodies, _CheckedBodies):
+        return bodies
     try:
         items = list(bodies)
     except TypeError:
@@ -170,7 +174,7 @@ def _check_bodies(
         except (TypeError, ValueError):
             raise ValueError(f"bodies[{k}] must be a (c, Q, r) triple") from None
         out.append(check_ellipsoid(c, Q, r, name=f"bodies[{k}]"))
-    return out
+    return _CheckedBodies(out)
 
 
 def _check_tol(tol: float, max_iter: int) -> None:
@@ -490,13 +494,32 @@ def closest_point_union(
     ells = _check_bodies(bodies)
     if not (np.isfinite(inside_tol) and inside_tol >= 0.0):
         raise ValueError(f"inside_tol must be finite and >= 0, got {inside_tol}")
-    projs = closest_points([x] * len(ells), ells, tol=tol, max_iter=max_iter)
-    gaps = np.stack([pr.gap for pr in projs], axis=1)
-    body = np.argmin(gaps, axis=1)
-    rows = np.arange(x.shape[0])
-    point = np.stack([pr.point for pr in projs], axis=1)[rows, body]
-    normal = np.stack([pr.normal for pr in projs], axis=1)[rows, body]
-    gap = gaps[rows, body]
+    n, k_all = x.shape[0], len(ells)
+    rows = np.arange(n)
+    gaps = np.full((n, k_all), np.inf)
+    points = np.zeros((n, k_all, 3))
+    normals = np.zeros((n, k_all, 3))
+
+    def project(sel: list[NDArray[np.intp]]) -> None:
+        projs = closest_points([x[s] for s in sel], ells, tol=tol, max_iter=max_iter)
+        for k, (s, pr) in enumerate(zip(sel, projs, strict=True)):
+            gaps[s, k], points[s, k], normals[s, k] = pr.gap, pr.point, pr.normal
+
+    if k_all == 1:
+        project([rows])
+    else:
+        # each point first on the ellipsoid of smallest gap lower bound, then on the others
+        # only where their bound does not clear that gap (points inside an ellipsoid: always;
+        # the bound holds for points outside): the same answer as projecting on every one
+        lb = gap_lower_bound(x, ells, per_body=True)
+        first = np.argmin(lb, axis=1)
+        project([np.flatnonzero(first == k) for k in range(k_all)])
+        need = (lb < 0.0) | (lb <= gaps[rows, first][:, None])
+        need[rows, first] = False
+        if need.any():
+            project([np.flatnonzero(need[:, k]) for k in range(k_all)])
+    body = np.argmin(gaps, axis=1)  # ties: the lower index
+    point, normal, gap = points[rows, body], normals[rows, body], gaps[rows, body]
     inside_other = np.zeros(x.shape[0], dtype=bool)
     if len(ells) > 1:
         for k, (c, Q, r) in enumerate(ells):

@@ -88,6 +88,15 @@ def _owned_nodes(V: fem.FunctionSpace) -> int:
     return V.dofmap.index_map.size_local
 
 
+def _assemble_owned(form: fem.FormMetaClass) -> np.ndarray:
+    """Assemble a linear form and return its owned entries (ghost contributions added)."""
+    b = fem_petsc.assemble_vector(form)
+    b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    out = b.getArray(readonly=True).copy()
+    b.destroy()
+    return out
+
+
 class ShellModel:
     """A fabric shell on a :class:`~clothfem.mesh.SurfaceMesh` with loads and supports.
 
@@ -339,12 +348,19 @@ class ShellModel:
                 raise ValueError(f"unknown load {load!r}")
         self._Pi_int = Pi
         self._W_ext = W_ext
-        R_u = ufl.derivative(Pi - W_ext, u, v) + follower
-        R_d = ufl.derivative(Pi, d, v)
+        # residual R = R_int(u, d) - F_ext: the internal part does not depend on the load
+        # factor (one assembly per state serves every lam); the dead loads are linear in u,
+        # so their force is state-independent and assembled once per lam; follower loads
+        # depend on the state and are assembled with it
+        R_int = [ufl.derivative(Pi, u, v), ufl.derivative(Pi, d, v)]
+        F_dead = ufl.derivative(W_ext, u, v) if W_ext != 0 else None
+        R_u = R_int[0] + follower  # the dead loads do not enter the Jacobian
         w = ufl.TrialFunction(self.V)
-        a = [[ufl.derivative(R, f, w) for f in (u, d)] for R in (R_u, R_d)]
-        self._R_forms = fem.form([R_u, R_d])
+        a = [[ufl.derivative(R, f, w) for f in (u, d)] for R in (R_u, R_int[1])]
+        self._R_forms = fem.form(R_int)
         self._K_forms = fem.form(a)
+        self._Fdead_form = fem.form(F_dead) if F_dead is not None else None
+        self._Ffollow_form = fem.form(-follower) if follower != 0 else None
         self._energy_form = fem.form(Pi)
         self._wext_form = fem.form(W_ext) if W_ext != 0 else None
         if self._moment_work != 0:
@@ -395,6 +411,8 @@ class ShellModel:
         P.assemble()
         self._P = P
         self._f_ext = P.createVecRight()
+        self._f_ext_lam: float | None = None  # the load factor f_ext was assembled at
+        self._fe_work = P.createVecRight()
         # G: 2x2 blocks on the theta diagonal
         g_indptr = np.concatenate([np.zeros(3 * n, dtype=int), 2 * np.arange(2 * n + 1)])
         g_cols = v0 + 3 * n + (2 * np.repeat(np.arange(n), 2)[:, None] + np.arange(2)).ravel()
@@ -415,9 +433,20 @@ class ShellModel:
         self.d.x.array[:] = rotation.director(self.basis, th).ravel()
         T, self._H = rotation.director_derivatives(self.basis[: self.n_owned], th[: self.n_owned])
         n = self.n_owned
+        self._T, self._T_at = T, th[:n].copy()
         self._P_data[3 * n :] = T.reshape(-1)  # rows (node, k), columns a
         self._P.setValuesCSR(self._P_indptr, self._P_indices, self._P_data)
         self._P.assemble()
+
+    def director_jacobian(self) -> np.ndarray:
+        """dd_A/dtheta_A (n_owned, 3, 2) at the current rotations (from the last
+        :meth:`update_director` when the rotations have not changed since)."""
+        n = self.n_owned
+        th = self.theta.x.array[: 2 * n].reshape(n, 2)
+        if not np.array_equal(th, self._T_at):
+            self._T, _ = rotation.director_derivatives(self.basis[:n], th)
+            self._T_at = th.copy()
+        return self._T
 
     def rebase(self, *, threshold: float = 0.5) -> np.ndarray:
         """Re-base the fibre basis of every node with |theta| > ``threshold`` [rad] on its
@@ -434,7 +463,9 @@ class ShellModel:
             th[nodes] = 0.0
             for k, E in enumerate(self._fibre_e):
                 E.x.array.reshape(-1, 3)[nodes] = self.basis[nodes, k]
-        self.update_director()  # collective (assembles P): every rank calls it
+        if self.comm.allreduce(len(nodes), op=MPI.SUM):  # collective decision
+            self._f_ext_lam = None  # edge moments act on the rotation in the new bases
+            self.update_director()  # collective (assembles P)
         return nodes
 
     def state_arrays(self) -> dict[str, np.ndarray]:
@@ -460,6 +491,7 @@ class ShellModel:
         self.basis[:] = data["basis"]
         for k, E in enumerate(self._fibre_e):
             E.x.array.reshape(-1, 3)[:] = self.basis[:, k]
+        self._f_ext_lam = None
         self.set_load_factor(float(data["load_factor"]))
         self.update_director()
 
@@ -487,18 +519,19 @@ class ShellModel:
     def set_load_factor(self, lam: float) -> None:
         """Set the load factor and assemble the parts of the load that do not depend on the
         state (point forces, edge moments) into the external force vector."""
+        if lam == self._f_ext_lam:  # f_ext already at lam (and at the current bases)
+            return
         self.lam.value = lam
-        self._Rw_at = None
+        self._f_ext_lam = lam
         self._f_ext.zeroEntries()
         n = self.n_owned
         arr = self._f_ext.getArray()
         if len(self._point_rows):
             np.add.at(arr, self._point_rows, lam * self._point_values)
         if self._Rm_form is not None:
-            b = fem_petsc.assemble_vector(self._Rm_form)
-            b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-            arr[3 * n :] += b.getArray(readonly=True)
-            b.destroy()
+            arr[3 * n :] += _assemble_owned(self._Rm_form)
+        if self._Fdead_form is not None:
+            arr[: 3 * n] += _assemble_owned(self._Fdead_form)
 
     def _assemble_Rw(self, x: PETSc.Vec) -> None:
         """Set the state to ``x`` and assemble the (u, d) residual, unless both are already
@@ -515,10 +548,17 @@ class ShellModel:
 
     def residual(self, x: PETSc.Vec, f: PETSc.Vec) -> None:
         """f = R(x) in the (u, theta) layout, without support conditions."""
+        self.forces(x, f, self._fe_work)
+
+    def forces(self, x: PETSc.Vec, r: PETSc.Vec, fe: PETSc.Vec) -> None:
+        """r = R(x) = f_int(x) - f_ext(x) and fe = f_ext(x) at the current load factor, in
+        the (u, theta) layout without support conditions (one internal assembly)."""
         self._assemble_Rw(x)
-        Rw = self._Rw
-        self._P.multTranspose(Rw, f)
-        f.axpy(-1.0, self._f_ext)
+        self._f_ext.copy(fe)
+        if self._Ffollow_form is not None:  # state-dependent: at x (set above)
+            fe.getArray()[: 3 * self.n_owned] += _assemble_owned(self._Ffollow_form)
+        self._P.multTranspose(self._Rw, r)
+        r.axpy(-1.0, fe)
 
     def jacobian(self, x: PETSc.Vec, K: PETSc.Mat | None = None) -> PETSc.Mat:
         """K = P^T K_w P + G at ``x`` (created if ``K`` is None), without supports."""

@@ -28,7 +28,9 @@ def run():
     model = ShellModel(sm, material=mat, thickness=1e-3)
     system = dy.ShellSystem(model, rotary_scale=100.0)
     contact = FilmContact(system, bodies_at)
-    recs, st = dy.integrate_explicit(system, t_end=0.03, contact=contact)
+    recs, st = dy.integrate_explicit(
+        system, t_end=0.03, contact=contact, on_step=lambda r: contact.collect()
+    )
     return model, contact, recs, st
 
 
@@ -89,8 +91,39 @@ def test_contact_with_a_body_at_rest_adds_no_energy(mu):
     model = ShellModel(sm, material=mat, thickness=1e-3, loads=[Gravity((0.0, 0.0, -9.81))])
     system = dy.ShellSystem(model, rotary_scale=100.0)
     contact = FilmContact(system, at_rest, params=FilmParameters(mu=mu))
-    recs, _ = dy.integrate_explicit(system, t_end=0.1, contact=contact)
+    recs, _ = dy.integrate_explicit(
+        system, t_end=0.1, contact=contact, on_step=lambda r: contact.collect()
+    )
     assert max(h.active for h in contact.history) > 5  # draped over the sphere
     work = recs[-1].external_work
     assert work > 0
     assert max(r.kinetic + r.strain - r.external_work for r in recs) <= 1e-3 * work
+
+
+def test_windowed_diagnostics_aggregate_the_steps(run):
+    """collect() every 4 steps gives the extremes, mean and sum of the per-step records of the
+    same (deterministic) run."""
+    _, contact, recs, _ = run
+    sm = meshes.strip(MPI.COMM_WORLD, length=0.1, width=0.1, nx=4, ny=4)
+    mat = FabricMaterial(E1=1e5, E2=1e5, G12=2e4, rho=500.0)
+    system = dy.ShellSystem(ShellModel(sm, material=mat, thickness=1e-3), rotary_scale=100.0)
+    windowed = FilmContact(system, bodies_at)
+
+    def every_fourth(r):
+        if r.step % 4 == 0 or r.step == len(recs):
+            windowed.collect()
+
+    dy.integrate_explicit(system, t_end=0.03, contact=windowed, on_step=every_fourth)
+    per_step = contact.history
+    start = 0
+    for w in windowed.history:
+        steps = per_step[start : start + w.steps]
+        start += w.steps
+        assert w.time == steps[-1].time and w.active == steps[-1].active
+        assert w.n_stick == steps[-1].n_stick
+        assert w.max_penetration == max(h.max_penetration for h in steps)
+        assert w.min_gap_after == min(h.min_gap_after for h in steps)
+        assert np.isclose(w.sum_lambda, np.mean([h.sum_lambda for h in steps]), rtol=1e-12)
+        assert np.isclose(w.dissipation, sum(h.dissipation for h in steps), rtol=1e-12, atol=0)
+    assert start == len(per_step) and len(windowed.history) > 2
+    assert windowed.dissipation_total == pytest.approx(contact.dissipation_total, rel=1e-12)
