@@ -135,7 +135,7 @@ class FilmContact:
         # in the step: the explicit step's other reductions set the pace)
         w = self._window
         w["steps"] += 1
-        w["local"][:] = (res.active.sum(), (res.active & res.stick).sum())
+        w["last"][:] = (res.active.sum(), (res.active & res.stick).sum())  # active, stick
         w["lam"] += float(res.lam_n.sum())
         w["diss"] += float(res.dissipation.sum())
         # predictor penetration of each corrected node: lambda dt^2 / m (Eq. 24)
@@ -149,10 +149,10 @@ class FilmContact:
     def _empty_window() -> dict:
         return {
             "steps": 0,
-            "local": np.zeros(2),
+            "last": np.zeros(2),  # of the last step: active, sticking nodes
             "lam": 0.0,
             "diss": 0.0,
-            "peaks": np.array([0.0, -np.inf]),
+            "peaks": np.array([0.0, -np.inf]),  # predictor penetration, -gap after
         }
 
     def collect(self) -> FilmRecord:
@@ -161,7 +161,7 @@ class FilmContact:
         w = self._window
         if w["steps"] == 0:
             raise RuntimeError("FilmContact.collect: no contact step since the last collect")
-        sums = np.concatenate([w["local"], [w["lam"], w["diss"]]])
+        sums = np.concatenate([w["last"], [w["lam"], w["diss"]]])
         self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
         peaks = w["peaks"].copy()
         self.comm.Allreduce(MPI.IN_PLACE, peaks, op=MPI.MAX)

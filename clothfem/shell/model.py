@@ -518,7 +518,8 @@ class ShellModel:
 
     def set_load_factor(self, lam: float) -> None:
         """Set the load factor and assemble the parts of the load that do not depend on the
-        state (point forces, edge moments) into the external force vector."""
+        state (point forces, edge moments, dead loads) into the external force vector (only
+        when ``lam`` or the fibre bases changed since the last call)."""
         if lam == self._f_ext_lam:  # f_ext already at lam (and at the current bases)
             return
         self.lam.value = lam
