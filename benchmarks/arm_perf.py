@@ -22,7 +22,12 @@ MUMPS's distributed LU (``-contact_lagrange_pc_type lu``). Writes `OUT/arm_perf.
 
 With ``--integrator explicit`` (central difference + FILM: no linear solve) the split is
 contact / io / other (other = the explicit step itself: forces, lumped solve, the
-predictor) and there is one 2-rank run per mesh.
+predictor) and there is one 2-rank run per mesh. ``--kernels numpy compiled`` runs every
+explicit case with each implementation of the FILM correction (``contact.kernel``) and
+reports the contact-layer and wall-time ratios of the two in the same run:
+
+    .venv/bin/python benchmarks/arm_perf.py --integrator explicit --meshes 16x20 32x40 \
+        --angle 10 --kernels numpy compiled --out results/arm-perf-explicit
 """
 
 import argparse
@@ -43,7 +48,9 @@ PARTS = ("t_assembly", "t_contact", "t_solve", "t_io")
 SOLVES = {"redundant": [], "distributed": ["-contact_lagrange_pc_type", "lu"]}
 
 
-def run(out: Path, mesh: str, angle: float, ranks: int, solve: str, integrator: str) -> dict:
+def run(
+    out: Path, mesh: str, angle: float, ranks: int, solve: str, integrator: str, kernel: str
+) -> dict:
     na, nl = mesh.split("x")
     sets = [
         f"solver.integrator={integrator}",
@@ -54,6 +61,7 @@ def run(out: Path, mesh: str, angle: float, ranks: int, solve: str, integrator: 
         f"body.1.angle_max={angle}",
         "output.png=false",
     ]
+    sets += [f"contact.kernel={kernel}"] if integrator == "explicit" else []
     cmd = [sys.executable, "-m", "clothfem.cli", "run", str(SCENE), "--out", str(out)]
     cmd += [a for s in sets for a in ("--set", s)]
     cmd += SOLVES[solve] if integrator == "newmark" else []
@@ -68,6 +76,7 @@ def run(out: Path, mesh: str, angle: float, ranks: int, solve: str, integrator: 
     row = {"mesh": mesh, "ranks": ranks, "solve": solve if ranks > 1 else "serial"}
     if integrator == "explicit":  # no linear solves: the 2-rank row has no solve variant
         row["solve"] = "explicit" + ("" if ranks > 1 else ", serial")
+        row["kernel"] = kernel
     row |= {"exit": res.returncode, "wall_s": wall}
     row["steps"] = int(s.get("steps", len(h["time"])))
     row["newton"] = int(h["newton_iterations"].sum()) if "newton_iterations" in h else 0
@@ -93,30 +102,50 @@ def main() -> None:
         default="newmark",
         help="solver.integrator (explicit: no linear solve, one 2-rank run per mesh)",
     )
+    ap.add_argument(
+        "--kernels",
+        nargs="+",
+        choices=("compiled", "numpy"),
+        default=["compiled"],
+        help="explicit: run every case with each FILM implementation (contact.kernel)",
+    )
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
+    kernels = args.kernels if args.integrator == "explicit" else ["compiled"]
     for mesh in args.meshes:
-        one = run(out / f"{mesh}_np1", mesh, args.angle, 1, "redundant", args.integrator)
-        rows.append(one)
-        solves = list(SOLVES) if args.integrator == "newmark" else ["redundant"]
-        for solve in solves:
-            two = run(out / f"{mesh}_np2_{solve}", mesh, args.angle, 2, solve, args.integrator)
-            two["speedup"] = one["wall_s"] / two["wall_s"]
-            if one["newton"] and two["newton"]:
-                two["speedup_per_newton"] = one["ms_per_newton"] / two["ms_per_newton"]
-            rows.append(two)
-        for r in rows[-(1 + len(solves)) :]:
-            print({k: round(v, 3) if isinstance(v, float) else v for k, v in r.items()}, flush=True)
+        for kernel in kernels:
+            tag = f"_{kernel}" if len(kernels) > 1 else ""
+            one = run(
+                out / f"{mesh}_np1{tag}", mesh, args.angle, 1, "redundant", args.integrator, kernel
+            )
+            rows.append(one)
+            solves = list(SOLVES) if args.integrator == "newmark" else ["redundant"]
+            for solve in solves:
+                path = out / f"{mesh}_np2_{solve}{tag}"
+                two = run(path, mesh, args.angle, 2, solve, args.integrator, kernel)
+                two["speedup"] = one["wall_s"] / two["wall_s"]
+                if one["newton"] and two["newton"]:
+                    two["speedup_per_newton"] = one["ms_per_newton"] / two["ms_per_newton"]
+                rows.append(two)
+            for r in rows[-(1 + len(solves)) :]:
+                print({k: round(v, 3) if isinstance(v, float) else v for k, v in r.items()})
+    if len(kernels) > 1:  # the same case with the other kernel: contact and wall ratios
+        base = {(r["mesh"], r["ranks"]): r for r in rows if r.get("kernel") == kernels[0]}
+        for r in rows:
+            b = base[(r["mesh"], r["ranks"])]
+            r[f"contact_vs_{kernels[0]}"] = r["contact_s"] / b["contact_s"]
+            r[f"wall_vs_{kernels[0]}"] = r["wall_s"] / b["wall_s"]
     keys = list(dict.fromkeys(k for r in rows for k in r))
     with open(out / "arm_perf.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
         w.writerows(rows)
-    cols = ["mesh", "ranks", "solve", "wall_s", "steps", "newton", "ms_per_newton", "ms_per_step"]
-    cols += ["assembly_pct"]
+    cols = ["mesh", "ranks", "solve", "kernel", "wall_s", "steps", "newton", "ms_per_newton"]
+    cols += ["ms_per_step", "assembly_pct", "contact_s"]
     cols += ["contact_pct", "solve_pct", "io_pct", "other_pct", "speedup", "speedup_per_newton"]
+    cols += [c for c in keys if c.startswith(("contact_vs_", "wall_vs_"))]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         cells = [r.get(c, "") for c in cols]

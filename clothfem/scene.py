@@ -379,6 +379,14 @@ SCHEMA: dict[str, Section] = {
                 default=0.0,
                 lo=0.0,
             ),
+            "kernel": Key(
+                "choice",
+                "film: the contact correction's implementation, 'compiled' (a C loop built "
+                "on first use with the system C compiler) or 'numpy' (the vectorised "
+                "reference; the same answers to round-off, slower)",
+                default="compiled",
+                choices=("compiled", "numpy"),
+            ),
             "increments": Key(
                 "int",
                 "equal recorded increments of the hinge motion (quasi-static)",

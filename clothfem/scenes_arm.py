@@ -125,7 +125,7 @@ def contact_log(scene: dict[str, Any]) -> list[str]:
         f"body: {len(segs)} rigid ellipsoid(s): " + "; ".join(segs),
         f"contact: {c['method']} "
         + (
-            "(forward-increment Lagrange multipliers, non-resilient), "
+            f"(forward-increment Lagrange multipliers, non-resilient, {c['kernel']} kernel), "
             if film
             else "(implicit Lagrange multipliers, active set), "
         )
@@ -526,10 +526,16 @@ def _bodies_at(scene: dict[str, Any], motions: list) -> Callable[[float], tuple[
     radii = [np.asarray(seg["radii"], dtype=float) for seg in scene["body"]]
     t_settle = scene["solver"]["settle_time"]
     zero = np.zeros(3)
+    # poses evaluated once: every segment's until t_settle, a fixed segment's for good
+    rest = [m.pose(0.0) for m in motions]
+    fixed = [isinstance(m, FixedMotion) for m in motions]
 
     def bodies_at(t: float):
-        poses = [m.pose(max(t - t_settle, 0.0)) for m in motions]
         moving = t > t_settle
+        poses = [
+            m.pose(t - t_settle) if moving and not f else p
+            for m, f, p in zip(motions, fixed, rest, strict=True)
+        ]
         vel = [(p.velocity, p.angular_velocity) if moving else (zero, zero) for p in poses]
         return [(p.centre, p.rotation, r) for p, r in zip(poses, radii, strict=True)], vel
 
@@ -827,7 +833,7 @@ def _run_explicit(
         f"{'converged' if st.converged else 'not converged'} in {st.iterations}), "
         f"dt {dt:.4e} s"
     )
-    fc = FilmContact(system, bodies_at, params=FilmParameters(mu=c["mu"]))
+    fc = FilmContact(system, bodies_at, params=FilmParameters(mu=c["mu"], kernel=c["kernel"]))
     if resume:
         fc.dissipation_total = float(data["contact_dissipation"])
         rank0_print(f"  resumed from the checkpoint after step {start['step']} (row {keep})")

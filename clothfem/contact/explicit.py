@@ -43,6 +43,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from clothfem.contact.compiled import film_kernel
 from clothfem.contact.friction import coulomb_return_map
 from clothfem.contact.geometry import (
     EllipsoidData,
@@ -56,6 +57,8 @@ from clothfem.contact.geometry import (
 __all__ = ["FilmResult", "film_step"]
 
 _GAP_TOL = 1e-12  # m per m of coordinate magnitude: round-off allowance on final gaps
+# the exact projections' root solve (closest_points' defaults, passed to the C loop too)
+_PROJ_TOL, _PROJ_MAX_ITER = 1e-13, 100
 
 FloatArray = NDArray[np.float64]
 
@@ -161,6 +164,7 @@ def film_step(
     mu: float | None = None,
     offset: float = 0.0,
     max_passes: int = 3,
+    kernel: str = "compiled",
 ) -> FilmResult:
     """One FILM contact correction (Eqs. 22-25) for point masses against moving ellipsoids.
 
@@ -192,6 +196,12 @@ def film_step(
         corrected position is still within ``offset`` of (or inside) another ellipsoid of the
         union -- possible where ellipsoids overlap, e.g. at the elbow -- are re-projected from
         there onto the union; those left are flagged ``unresolved``.
+    kernel : {"compiled", "numpy"}, optional
+        ``"compiled"`` (default): the C loop of ``film_kernel.c``
+        (:mod:`clothfem.contact.compiled`); ``"numpy"``: the vectorised NumPy reference
+        below. Both run the same algorithm in the same order of operations and agree to
+        round-off (tested); the C loop avoids NumPy's per-call overhead, which dominates at
+        the few hundred contact nodes of a sleeve.
 
     Returns
     -------
@@ -219,7 +229,96 @@ def film_step(
         raise ValueError(f"offset must be a finite contact thickness >= 0 m, got {offset}")
     if int(max_passes) != max_passes or max_passes < 1:
         raise ValueError(f"max_passes must be an integer >= 1, got {max_passes}")
+    if kernel == "compiled":
+        return _film_compiled(xs, vs, mass, dt, ells, vc, om, mu, offset, int(max_passes))
+    if kernel != "numpy":
+        raise ValueError(f"kernel must be 'compiled' or 'numpy', got {kernel!r}")
+    return _film_numpy(xs, vs, mass, dt, ells, vc, om, mu, offset, int(max_passes))
 
+
+def _film_compiled(
+    xs: FloatArray,
+    vs: FloatArray,
+    mass: FloatArray,
+    dt: float,
+    ells: Sequence[tuple[FloatArray, FloatArray, FloatArray]],
+    vc: FloatArray,
+    om: FloatArray,
+    mu: float | None,
+    offset: float,
+    max_passes: int,
+) -> FilmResult:
+    """:func:`film_step` by the C loop of ``film_kernel.c`` (validated input)."""
+    n, k = xs.shape[0], len(ells)
+    c = np.ascontiguousarray([e[0] for e in ells], dtype=float)
+    Q = np.ascontiguousarray([e[1] for e in ells], dtype=float)
+    r = np.ascontiguousarray([e[2] for e in ells], dtype=float)
+    x, v, force, friction, normal = (np.empty((n, 3)) for _ in range(5))
+    lam_n, gap, dissipation = np.empty(n), np.empty(n), np.empty(n)
+    active, stick, unresolved = (np.empty(n, dtype=np.uint8) for _ in range(3))
+    body = np.empty(n, dtype=np.int64)
+    film_kernel()(
+        n,
+        np.ascontiguousarray(xs),
+        np.ascontiguousarray(vs),
+        np.ascontiguousarray(mass),
+        dt,
+        k,
+        c,
+        Q,
+        r,
+        np.ascontiguousarray(vc),
+        np.ascontiguousarray(om),
+        int(mu is not None),
+        0.0 if mu is None else float(mu),
+        offset,
+        max_passes,
+        _PROJ_TOL,
+        _PROJ_MAX_ITER,
+        _GAP_TOL,
+        x,
+        v,
+        active,
+        lam_n,
+        force,
+        friction,
+        normal,
+        body,
+        gap,
+        stick,
+        dissipation,
+        unresolved,
+    )
+    return FilmResult(
+        x,
+        v,
+        active.view(bool),
+        lam_n,
+        force,
+        friction,
+        normal,
+        body.astype(np.intp, copy=False),
+        gap,
+        stick.view(bool),
+        dissipation,
+        unresolved.view(bool),
+    )
+
+
+def _film_numpy(
+    xs: FloatArray,
+    vs: FloatArray,
+    mass: FloatArray,
+    dt: float,
+    ells: Sequence[tuple[FloatArray, FloatArray, FloatArray]],
+    vc: FloatArray,
+    om: FloatArray,
+    mu: float | None,
+    offset: float,
+    max_passes: int,
+) -> FilmResult:
+    """:func:`film_step` in vectorised NumPy (validated input): the reference of the C loop."""
+    n = xs.shape[0]
     # broad phase: exact projections only where the gap's lower bound does not clear offset
     gap = gap_lower_bound(xs, ells)
     scale = max(1.0, float(np.max(np.abs(xs), initial=0.0)))

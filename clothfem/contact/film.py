@@ -40,11 +40,13 @@ class FilmParameters:
     """mu: None for the paper's non-resilient rule (the node moves with the body), or a
     Coulomb coefficient >= 0 limiting the tangential velocity change; offset: contact
     thickness [m] kept between node and surface (>= 0); max_passes: projection passes at
-    overlapping ellipsoids (>= 1)."""
+    overlapping ellipsoids (>= 1); kernel: "compiled" (the C loop) or "numpy" (the vectorised
+    reference) implementation of :func:`clothfem.contact.explicit.film_step`."""
 
     mu: float | None = None
     offset: float = 0.0
     max_passes: int = 3
+    kernel: str = "compiled"
 
     def __post_init__(self) -> None:
         if self.mu is not None and not (np.isfinite(self.mu) and self.mu >= 0):
@@ -54,6 +56,10 @@ class FilmParameters:
         if int(self.max_passes) != self.max_passes or self.max_passes < 1:
             raise ValueError(
                 f"FilmParameters max_passes must be an integer >= 1, got {self.max_passes!r}"
+            )
+        if self.kernel not in ("compiled", "numpy"):
+            raise ValueError(
+                f"FilmParameters kernel must be 'compiled' or 'numpy', got {self.kernel!r}"
             )
 
 
@@ -104,32 +110,39 @@ class FilmContact:
         self._window = self._empty_window()
         self.wall = 0.0  # seconds spent in the contact corrections
         self._free = np.ones(n, dtype=bool)
+        self._rows: np.ndarray | None = None  # the prescribed rows _free was built from
 
     def correct_positions(self, x: PETSc.Vec, v_pred: PETSc.Vec, t: float, h: float, rows) -> None:
         """Project the penetrating nodes of the predictor ``x`` (in place)."""
         t0 = time.perf_counter()
         n = self.n
-        free = np.ones(n, dtype=bool)
-        u_rows = np.asarray(rows)[np.asarray(rows) < 3 * n]
-        free[u_rows // 3] = False
-        self._free = free
+        rows = np.asarray(rows)
+        if self._rows is None or not np.array_equal(rows, self._rows):
+            # nodes with a prescribed displacement row are not corrected (rebuilt only when
+            # the prescribed rows change, i.e. once for a scene's supports)
+            self._rows = rows.copy()
+            self._free = np.ones(n, dtype=bool)
+            self._free[rows[rows < 3 * n] // 3] = False
+            self._X_free, self._m_free = self.X[self._free], self.mass[self._free]
+        free = self._free
         xa = x.getArray()
         u = xa[: 3 * n].reshape(n, 3)
         v = v_pred.getArray(readonly=True)[: 3 * n].reshape(n, 3)
         geo, vel = self.bodies_at(t)
         p = self.params
         res = film_step(
-            self.X[free] + u[free],
+            self._X_free + u[free],
             v[free],
-            self.mass[free],
+            self._m_free,
             h,
             geo,
             body_velocities=vel,
             mu=p.mu,
             offset=p.offset,
             max_passes=p.max_passes,
+            kernel=p.kernel,
         )
-        u[free] = res.x - self.X[free]
+        u[free] = res.x - self._X_free
         self.last = res
         # rank-local diagnostics, reduced once per window by collect() (no collective call
         # in the step: the explicit step's other reductions set the pace)
@@ -139,7 +152,7 @@ class FilmContact:
         w["lam"] += float(res.lam_n.sum())
         w["diss"] += float(res.dissipation.sum())
         # predictor penetration of each corrected node: lambda dt^2 / m (Eq. 24)
-        pen = float(np.max(res.lam_n * h * h / self.mass[free], initial=0.0))
+        pen = float(np.max(res.lam_n * h * h / self._m_free, initial=0.0))
         w["peaks"][0] = max(w["peaks"][0], pen)
         w["peaks"][1] = max(w["peaks"][1], -float(np.min(res.gap, initial=np.inf)))
         self.time = t

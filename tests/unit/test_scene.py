@@ -75,6 +75,7 @@ def test_defaults_filled():
             _with("contact.newton_stall_limit", 0),
             r"'contact.newton_stall_limit': must be an integer in \[1, inf\]",
         ),
+        (_with("contact.kernel", "cuda"), "'contact.kernel': must be one of 'compiled', 'numpy'"),
     ],
 )
 def test_bad_scenes_one_line_errors(data, message):

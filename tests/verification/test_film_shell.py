@@ -72,6 +72,8 @@ def test_bad_parameters():
         FilmParameters(mu=-0.1)
     with pytest.raises(ValueError, match="offset must be >= 0"):
         FilmParameters(offset=-1.0)
+    with pytest.raises(ValueError, match="kernel must be 'compiled' or 'numpy', got 'c'"):
+        FilmParameters(kernel="c")
 
 
 @pytest.mark.parametrize("mu", [None, 0.0, 0.3])
