@@ -33,12 +33,13 @@ R = 0.06 m and thickness's 1 mm cases) is copied from it, not run again (``case.
 names it under ``same_as``; ``--force`` runs it).
 
 Integrator: ``--integrator`` (default ``explicit``: central difference + FILM contact at
-0.9 dt_crit; ``newmark`` = the implicit path of the scene file) for every case, except
-material sets II and III, which always run ``newmark``: the explicit step is bounded by the
-membrane wave speed sqrt(E / rho), 17x (set II) and 61x (set III) faster than in cotton, so
-an explicit run would take 17x / 61x the steps (hours to days), while the implicit step does
-not depend on it. The ladder (``arm_ladder.py``) puts explicit 16x20 within a few % of
-implicit 16x20 and of the explicit 32x40 reference at a third of the implicit cost.
+0.9 dt_crit; ``newmark`` = implicit Newmark, dt 0.01 s) for every case. The explicit step is
+bounded by the membrane wave speed sqrt(E / rho), 17x (set II) and 61x (set III) faster
+than in cotton, so material sets II and III take 17x / 61x the cotton run's steps (until
+session 9 they always ran ``newmark`` for that reason; with the compiled contact kernel of
+session 10 an explicit 16x20 step costs ~4 ms, so they are minutes to half an hour).
+``--stiff-integrator newmark`` runs sets II and III implicitly whatever ``--integrator``
+says. The ladder (``arm_ladder.py``) puts explicit 16x20 within a few % of implicit 16x20.
 
 Studies b-e use the mesh ``--mesh`` (default 16x20, ``--quick`` 8x10). ``--angle-max DEG``
 overrides the forearm's angle_max (and scales contact.increments to keep 1-degree
@@ -95,7 +96,7 @@ STUDIES = ("mesh", "friction", "fit", "thickness", "material")
 MESHES = [(8, 10), (12, 16), (16, 20), (24, 30)]
 QUICK_MESHES = [(8, 10), (12, 16)]
 RATIO_ANGLES = (10, 20, 30, 40, 50)
-STIFF_SETS = ("II", "III")  # always implicit (Newmark): see the module docstring
+STIFF_SETS = ("II", "III")  # --stiff-integrator applies to these (module docstring)
 # Sec. 4.1.5 material sets: E1 = E2 = E, nu12 = 0 and, as the paper says for all three sets,
 # G12 = E / 200 (so set I here is softer in shear than the crimped-cotton preset's 0.1 MPa).
 MATERIALS = {
@@ -149,7 +150,11 @@ def study_cases(study: str, args: argparse.Namespace) -> list[Case]:
                     f"material.G12={m['G12']:g}",
                     f"material.rho={m['rho']:g}",
                     "contact.mu=0.1",
-                    *(["solver.integrator=newmark"] if name in STIFF_SETS else []),
+                    *(
+                        [f"solver.integrator={args.stiff_integrator}"]
+                        if name in STIFF_SETS and args.stiff_integrator
+                        else []
+                    ),
                 ],
                 {"set": name, "E_Pa": m["E"], "G12_Pa": m["G12"], "rho": m["rho"], "mu": 0.1},
             )
@@ -276,8 +281,13 @@ def main(argv: list[str] | None = None) -> int:
         "--integrator",
         choices=("explicit", "newmark", "static"),
         default="explicit",
-        help="solver.integrator of every case (default %(default)s; material sets II and III"
-        " always newmark)",
+        help="solver.integrator of every case (default %(default)s)",
+    )
+    parser.add_argument(
+        "--stiff-integrator",
+        choices=("explicit", "newmark"),
+        default=None,
+        help="solver.integrator of material sets II and III (default: --integrator's)",
     )
     args = parser.parse_args(argv)
     out = Path(args.out)
