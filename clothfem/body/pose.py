@@ -37,7 +37,12 @@ def check_rotation(q: ArrayLike, *, what: str, tol: float = 1e-6) -> NDArray[np.
     err = float(np.max(np.abs(a.T @ a - np.eye(3))))
     if err > tol:
         raise ValueError(f"{what}: must be orthonormal (|Q^T Q - I| <= {tol:g}), got {err:.3g}")
-    det = float(np.linalg.det(a))
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = a.tolist()
+    det = (
+        a00 * (a11 * a22 - a12 * a21)
+        - a01 * (a10 * a22 - a12 * a20)
+        + a02 * (a10 * a21 - a11 * a20)
+    )
     if det < 0.0:
         raise ValueError(f"{what}: must be right-handed (det = +1), got det = {det:.6g}")
     return a

@@ -69,6 +69,17 @@ _I = np.ctypeslib.ndpointer(dtype=np.int64, flags="C_CONTIGUOUS")
 _L, _F, _INT = ctypes.c_long, ctypes.c_double, ctypes.c_int
 
 
+class _MaskOrNone:
+    """ctypes argument: a C-contiguous uint8 array, or None for a NULL pointer."""
+
+    @classmethod
+    def from_param(cls, a):
+        return None if a is None else _B.from_param(a)
+
+
+_MASK = _MaskOrNone
+
+
 @cache
 def film_kernel():
     """The ``film_correct`` C function (built on first use; :class:`KernelBuildError` if the
@@ -76,8 +87,8 @@ def film_kernel():
     fn = ctypes.CDLL(str(_build(_SOURCE))).film_correct
     fn.restype = ctypes.c_int
     # n, xs, vs, m, dt, K, c, Q, r, vc, om, has_mu, mu, offset, max_passes, tol, max_iter,
-    # gap_tol, then the outputs x, v, active, lam_n, force, friction, normal, body, gap,
-    # stick, dissipation, unresolved
+    # gap_tol, fixed (uint8 mask or None), then the outputs x, v, active, lam_n, force,
+    # friction, normal, body, gap, stick, dissipation, unresolved
     fn.argtypes = [_L, _D, _D, _D, _F, _L, _D, _D, _D, _D, _D, _INT, _F, _F, _L, _F, _L, _F]
-    fn.argtypes += [_D, _D, _B, _D, _D, _D, _D, _I, _D, _B, _D, _B]
+    fn.argtypes += [_MASK, _D, _D, _B, _D, _D, _D, _D, _I, _D, _B, _D, _B]
     return fn

@@ -164,6 +164,7 @@ def film_step(
     mu: float | None = None,
     offset: float = 0.0,
     max_passes: int = 3,
+    fixed: ArrayLike | None = None,
     kernel: str = "compiled",
 ) -> FilmResult:
     """One FILM contact correction (Eqs. 22-25) for point masses against moving ellipsoids.
@@ -196,6 +197,10 @@ def film_step(
         corrected position is still within ``offset`` of (or inside) another ellipsoid of the
         union -- possible where ellipsoids overlap, e.g. at the elbow -- are re-projected from
         there onto the union; those left are flagged ``unresolved``.
+    fixed : (N,) bool array, optional
+        Nodes that are never corrected (prescribed displacements): their ``x``/``v`` are
+        ``x*``/``v*``, they are inactive, and their ``gap`` is ``inf`` (not evaluated). The
+        result is that of the other nodes alone.
     kernel : {"compiled", "numpy"}, optional
         ``"compiled"`` (default): the C loop of ``film_kernel.c``
         (:mod:`clothfem.contact.compiled`); ``"numpy"``: the vectorised NumPy reference
@@ -229,11 +234,28 @@ def film_step(
         raise ValueError(f"offset must be a finite contact thickness >= 0 m, got {offset}")
     if int(max_passes) != max_passes or max_passes < 1:
         raise ValueError(f"max_passes must be an integer >= 1, got {max_passes}")
+    if fixed is not None:
+        fixed = np.asarray(fixed)
+        if fixed.shape != (n,) or fixed.dtype != bool:
+            raise ValueError(f"fixed must be a bool array of shape ({n},), got {fixed.shape}")
+    args = (xs, vs, mass, dt, ells, vc, om, mu, offset, int(max_passes), fixed)
     if kernel == "compiled":
-        return _film_compiled(xs, vs, mass, dt, ells, vc, om, mu, offset, int(max_passes))
+        return _film_compiled(*args)
     if kernel != "numpy":
         raise ValueError(f"kernel must be 'compiled' or 'numpy', got {kernel!r}")
-    return _film_numpy(xs, vs, mass, dt, ells, vc, om, mu, offset, int(max_passes))
+    if fixed is None or not fixed.any():
+        return _film_numpy(*args[:-1])
+    # the free nodes alone, then the fixed ones as they came (inactive, gap not evaluated)
+    free = ~fixed
+    sub = _film_numpy(xs[free], vs[free], mass[free], *args[3:-1])
+    z, z3, no = np.zeros(n), np.zeros((n, 3)), np.zeros(n, dtype=bool)
+    full = FilmResult(
+        xs.copy(), vs.copy(), no.copy(), z.copy(), z3.copy(), z3.copy(), z3.copy(),
+        np.full(n, -1, dtype=np.intp), np.full(n, np.inf), no.copy(), z.copy(), no.copy(),
+    )  # fmt: skip
+    for whole, part in zip(full, sub, strict=True):
+        whole[free] = part
+    return full
 
 
 def _film_compiled(
@@ -247,6 +269,7 @@ def _film_compiled(
     mu: float | None,
     offset: float,
     max_passes: int,
+    fixed: NDArray[np.bool_] | None,
 ) -> FilmResult:
     """:func:`film_step` by the C loop of ``film_kernel.c`` (validated input)."""
     n, k = xs.shape[0], len(ells)
@@ -276,6 +299,7 @@ def _film_compiled(
         _PROJ_TOL,
         _PROJ_MAX_ITER,
         _GAP_TOL,
+        None if fixed is None else np.ascontiguousarray(fixed).view(np.uint8),
         x,
         v,
         active,

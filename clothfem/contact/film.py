@@ -109,8 +109,9 @@ class FilmContact:
         self.time = 0.0  # of the last corrected step [s]
         self._window = self._empty_window()
         self.wall = 0.0  # seconds spent in the contact corrections
-        self._free = np.ones(n, dtype=bool)
-        self._rows: np.ndarray | None = None  # the prescribed rows _free was built from
+        self._fixed = np.zeros(n, dtype=bool)  # nodes with prescribed displacements
+        self._rows: np.ndarray | None = None  # the prescribed rows _fixed was built from
+        self._act = np.zeros(0, dtype=np.intp)  # nodes corrected in the last step
 
     def correct_positions(self, x: PETSc.Vec, v_pred: PETSc.Vec, t: float, h: float, rows) -> None:
         """Project the penetrating nodes of the predictor ``x`` (in place)."""
@@ -121,38 +122,37 @@ class FilmContact:
             # nodes with a prescribed displacement row are not corrected (rebuilt only when
             # the prescribed rows change, i.e. once for a scene's supports)
             self._rows = rows.copy()
-            self._free = np.ones(n, dtype=bool)
-            self._free[rows[rows < 3 * n] // 3] = False
-            self._X_free, self._m_free = self.X[self._free], self.mass[self._free]
-        free = self._free
-        xa = x.getArray()
-        u = xa[: 3 * n].reshape(n, 3)
+            self._fixed = np.zeros(n, dtype=bool)
+            self._fixed[rows[rows < 3 * n] // 3] = True
+        u = x.getArray()[: 3 * n].reshape(n, 3)
         v = v_pred.getArray(readonly=True)[: 3 * n].reshape(n, 3)
         geo, vel = self.bodies_at(t)
         p = self.params
         res = film_step(
-            self._X_free + u[free],
-            v[free],
-            self._m_free,
+            self.X + u,
+            v,
+            self.mass,
             h,
             geo,
             body_velocities=vel,
             mu=p.mu,
             offset=p.offset,
             max_passes=p.max_passes,
+            fixed=self._fixed,
             kernel=p.kernel,
         )
-        u[free] = res.x - self._X_free
-        self.last = res
+        act = np.flatnonzero(res.active)
+        u[act] = res.x[act] - self.X[act]  # the other nodes' unknowns are left bit for bit
+        self.last, self._act = res, act
         # rank-local diagnostics, reduced once per window by collect() (no collective call
         # in the step: the explicit step's other reductions set the pace)
         w = self._window
         w["steps"] += 1
-        w["last"][:] = (res.active.sum(), (res.active & res.stick).sum())  # active, stick
+        w["last"][:] = (act.size, np.count_nonzero(res.stick[act]))  # active, sticking
         w["lam"] += float(res.lam_n.sum())
         w["diss"] += float(res.dissipation.sum())
         # predictor penetration of each corrected node: lambda dt^2 / m (Eq. 24)
-        pen = float(np.max(res.lam_n * h * h / self._m_free, initial=0.0))
+        pen = float(np.max(res.lam_n[act] * h * h / self.mass[act], initial=0.0))
         w["peaks"][0] = max(w["peaks"][0], pen)
         w["peaks"][1] = max(w["peaks"][1], -float(np.min(res.gap, initial=np.inf)))
         self.time = t
@@ -200,30 +200,20 @@ class FilmContact:
         t0 = time.perf_counter()
         n = self.n
         va = v.getArray()[: 3 * n].reshape(n, 3)
-        idx = np.flatnonzero(self._free)[self.last.active]
-        va[idx] = self.last.v[self.last.active]
+        va[self._act] = self.last.v[self._act]
         self.wall += time.perf_counter() - t0
 
     def forces_on_body(self) -> np.ndarray:
         """Nodal contact forces on the body [N] of the last step, (n_owned, 3)."""
-        f = np.zeros((self.n, 3))
-        if self.last is not None:
-            f[self._free] = -self.last.force
-        return f
+        return np.zeros((self.n, 3)) if self.last is None else -self.last.force
 
     def nodal_multipliers(self) -> np.ndarray:
         """Normal multipliers of the last step per owned node [N] (0 where not in contact)."""
-        lam = np.zeros(self.n)
-        if self.last is not None:
-            lam[self._free] = self.last.lam_n
-        return lam
+        return np.zeros(self.n) if self.last is None else self.last.lam_n.copy()
 
     def contact_body(self) -> np.ndarray:
         """Index of the ellipsoid each owned node touched in the last step (-1: none)."""
-        body = np.full(self.n, -1, dtype=np.intp)
-        if self.last is not None:
-            body[self._free] = self.last.body
-        return body
+        return np.full(self.n, -1, dtype=np.intp) if self.last is None else self.last.body.copy()
 
     def resultant(self) -> np.ndarray:
         """Total contact force on the body(ies) of the last step [N], reduced over ranks."""

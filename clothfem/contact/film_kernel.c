@@ -170,15 +170,17 @@ static int near_others(const double *x, long own, const Bodies *B, double cut)
 int film_correct(long n, const double *xs, const double *vs, const double *m, double dt, long K,
                  const double *c, const double *Q, const double *r, const double *vc,
                  const double *om, int has_mu, double mu, double offset, long max_passes,
-                 double tol, long max_iter, double gap_tol, double *x, double *v,
+                 double tol, long max_iter, double gap_tol, const uint8_t *fixed,
+                 double *x, double *v,
                  uint8_t *active, double *lam_n, double *force, double *friction,
                  double *normal, int64_t *body, double *gap, uint8_t *stick,
                  double *dissipation, uint8_t *unresolved)
 {
     Bodies B = {K, c, Q, r, tol, max_iter};
     double dt2 = dt * dt;
-    double scale = 1.0;
-    for (long i = 0; i < 3 * n; ++i) scale = fmax(scale, fabs(xs[i]));
+    double scale = 1.0; /* over the nodes that may be corrected */
+    for (long i = 0; i < 3 * n; ++i)
+        if (!fixed || !fixed[i / 3]) scale = fmax(scale, fabs(xs[i]));
     double near_cut = offset + gap_tol * scale;
 
     /* broad phase, projection, activity; the contact point is kept in x for now */
@@ -186,11 +188,13 @@ int film_correct(long n, const double *xs, const double *vs, const double *m, do
     long n_active = 0;
     for (long i = 0; i < n; ++i) {
         const double *xi = xs + 3 * i;
+        int skip = fixed && fixed[i]; /* a fixed node: as it came, gap not evaluated */
         double g = INFINITY;
-        for (long k = 0; k < K; ++k) g = fmin(g, lower_bound(xi, c + 3 * k, Q + 9 * k, r + 3 * k));
+        for (long k = 0; k < K && !skip; ++k)
+            g = fmin(g, lower_bound(xi, c + 3 * k, Q + 9 * k, r + 3 * k));
         double p[3], nr[3];
         long bk = -1;
-        if (g < near_cut) g = closest_union(xi, &B, p, nr, &bk);
+        if (!skip && g < near_cut) g = closest_union(xi, &B, p, nr, &bk);
         gap[i] = g;
         active[i] = g < offset;
         stick[i] = unresolved[i] = 0;

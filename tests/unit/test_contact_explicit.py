@@ -253,6 +253,26 @@ def test_compiled_kernel_equals_numpy_reference(mu, offset, max_passes) -> None:
             np.testing.assert_allclose(fb, fa, rtol=0, atol=1e-14 * scale, err_msg=name)
 
 
+def test_fixed_nodes_are_left_as_they_came(film) -> None:
+    """Prescribed nodes (``fixed``) are not corrected, and the other nodes get exactly the
+    answer of a step without the fixed ones."""
+    x, v, m, bodies, vel = _sleeve_like_cloud(600, seed=5)
+    fixed = np.zeros(600, dtype=bool)
+    fixed[::7] = True
+    kw = dict(body_velocities=vel, mu=0.3, offset=2e-4)
+    res = film(x, v, m, 3e-4, bodies, fixed=fixed, **kw)
+    alone = film(x[~fixed], v[~fixed], m[~fixed], 3e-4, bodies, **kw)
+    assert alone.active.sum() > 50 and (closest_point_union(x[fixed], bodies).gap < 0).any()
+    for name in res._fields:
+        np.testing.assert_array_equal(getattr(res, name)[~fixed], getattr(alone, name), name)
+    np.testing.assert_array_equal(res.x[fixed], x[fixed])
+    np.testing.assert_array_equal(res.v[fixed], v[fixed])
+    assert not res.active[fixed].any() and np.all(res.force[fixed] == 0.0)
+    assert np.all(res.gap[fixed] == np.inf) and np.all(res.body[fixed] == -1)
+    with pytest.raises(ValueError, match=r"fixed must be a bool array of shape \(600,\)"):
+        film(x, v, m, 3e-4, bodies, fixed=np.zeros(600))
+
+
 def test_unknown_kernel_and_compiler_failure_raise(tmp_path, monkeypatch) -> None:
     from clothfem.contact.compiled import KernelBuildError, _build
 
