@@ -187,6 +187,12 @@ class FixedMotion:
         )
 
 
+def _cross3(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a x b`` of two 3-vectors (np.cross's arithmetic, without its per-call overhead)."""
+    (a0, a1, a2), (b0, b1, b2) = a.tolist(), b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def _axis_rotation(axis: NDArray[np.float64], angle: float) -> NDArray[np.float64]:
     return Rotation.from_rotvec(angle * axis).as_matrix()
 
@@ -251,7 +257,7 @@ class HingeMotion:
 
     def angle(self, t: float) -> float:
         """Hinge angle ``theta(t)`` in rad."""
-        return self.omega * float(np.clip(t - self.t_start, 0.0, self.angle_max / self.omega))
+        return self.omega * min(max(float(t) - self.t_start, 0.0), self.angle_max / self.omega)
 
     def pose(self, t: float) -> Pose:
         """Pose at ``t`` (s); angular velocity ``omega * axis`` for ``t_start <= t < t_end``."""
@@ -263,7 +269,7 @@ class HingeMotion:
             time=t,
             centre=centre,
             rotation=r @ self.rotation0,
-            velocity=np.cross(w, centre - self.joint),
+            velocity=_cross3(w, centre - self.joint),
             angular_velocity=w,
         )
 

@@ -48,6 +48,7 @@ from clothfem.contact.friction import coulomb_return_map
 from clothfem.contact.geometry import (
     EllipsoidData,
     _check_bodies,
+    _CheckedBodies,
     check_points,
     closest_point_union,
     closest_points,
@@ -263,7 +264,7 @@ def _film_compiled(
     vs: FloatArray,
     mass: FloatArray,
     dt: float,
-    ells: Sequence[tuple[FloatArray, FloatArray, FloatArray]],
+    ells: _CheckedBodies,
     vc: FloatArray,
     om: FloatArray,
     mu: float | None,
@@ -273,9 +274,7 @@ def _film_compiled(
 ) -> FilmResult:
     """:func:`film_step` by the C loop of ``film_kernel.c`` (validated input)."""
     n, k = xs.shape[0], len(ells)
-    c = np.ascontiguousarray([e[0] for e in ells], dtype=float)
-    Q = np.ascontiguousarray([e[1] for e in ells], dtype=float)
-    r = np.ascontiguousarray([e[2] for e in ells], dtype=float)
+    c, Q, r = (np.ascontiguousarray(a) for a in (ells.c, ells.Q, ells.r))
     x, v, force, friction, normal = (np.empty((n, 3)) for _ in range(5))
     lam_n, gap, dissipation = np.empty(n), np.empty(n), np.empty(n)
     active, stick, unresolved = (np.empty(n, dtype=np.uint8) for _ in range(3))

@@ -155,7 +155,12 @@ def check_ellipsoid(
 
 
 class _CheckedBodies(tuple):
-    """Ellipsoids that passed :func:`_check_bodies` (not checked again when passed on)."""
+    """Ellipsoids that passed :func:`_check_bodies` (not checked again when passed on), with
+    their data stacked: ``c`` (K, 3), ``Q`` (K, 3, 3), ``r`` (K, 3)."""
+
+    c: FloatArray
+    Q: FloatArray
+    r: FloatArray
 
 
 def _check_bodies(bodies: Sequence[EllipsoidData]) -> _CheckedBodies:
@@ -167,14 +172,34 @@ def _check_bodies(bodies: Sequence[EllipsoidData]) -> _CheckedBodies:
         raise ValueError("bodies must be a sequence of (c, Q, r) triples") from None
     if not items:
         raise ValueError("bodies must contain at least one (c, Q, r) triple, got none")
-    out = []
-    for k, b in enumerate(items):
-        try:
-            c, Q, r = b
-        except (TypeError, ValueError):
-            raise ValueError(f"bodies[{k}] must be a (c, Q, r) triple") from None
-        out.append(check_ellipsoid(c, Q, r, name=f"bodies[{k}]"))
-    return _CheckedBodies(out)
+    # fast path: every body checked at once on the stacked arrays (the contact step calls
+    # this every time step); any failure is reported by the per-body checks below
+    try:
+        c = np.array([b[0] for b in items], dtype=float)
+        Q = np.array([b[1] for b in items], dtype=float)
+        r = np.array([b[2] for b in items], dtype=float)
+        k = len(items)
+        ok = c.shape == (k, 3) and Q.shape == (k, 3, 3) and r.shape == (k, 3)
+        ok = ok and all(len(b) == 3 for b in items)
+        ok = ok and bool(np.isfinite(c).all() & np.isfinite(Q).all() & np.isfinite(r).all())
+        ok = ok and bool((r > 0.0).all())
+        ok = ok and float(np.abs(np.einsum("kji,kjl->kil", Q, Q) - np.eye(3)).max()) <= _ORTHO_TOL
+    except (TypeError, ValueError, IndexError):
+        ok = False
+    if ok:
+        out = _CheckedBodies(zip(c, Q, r, strict=True))
+    else:
+        checked = []
+        for k, b in enumerate(items):
+            try:
+                cb, Qb, rb = b
+            except (TypeError, ValueError):
+                raise ValueError(f"bodies[{k}] must be a (c, Q, r) triple") from None
+            checked.append(check_ellipsoid(cb, Qb, rb, name=f"bodies[{k}]"))
+        out = _CheckedBodies(checked)
+        c, Q, r = (np.array([e[i] for e in checked]) for i in range(3))
+    out.c, out.Q, out.r = c, Q, r
+    return out
 
 
 def _check_tol(tol: float, max_iter: int) -> None:
