@@ -367,6 +367,23 @@ def test_energy_balance_with_work(prescribed):
     assert max(abs(r.total - r.external_work) for r in recs) < 1e-10 * scale
 
 
+def test_explicit_measure_skips_only_the_strain_energy():
+    """measure(step, t) picks the records that carry the strain energy: the motion, kinetic
+    energy and work are those of the run that measures every step, the measured records'
+    strain energy and energy balance too; the others have nan there."""
+    kw = dict(t_end=3.0, dt=0.05, load=lambda t: math.sin(1.3 * t))
+    full, _ = dy.integrate_explicit(_chain(prescribed=True), **kw)
+    part, _ = dy.integrate_explicit(_chain(prescribed=True), measure=lambda k, t: k % 7 == 0, **kw)
+    assert len(part) == len(full) == 60
+    for a, b in zip(full, part, strict=True):
+        assert (b.time, b.kinetic, b.external_work) == (a.time, a.kinetic, a.external_work)
+        if b.step % 7 == 0:
+            assert (b.strain, b.dissipation) == (a.strain, a.dissipation)
+            assert math.isfinite(b.strain) and b.strain > 0
+        else:
+            assert math.isnan(b.strain) and math.isnan(b.dissipation)
+
+
 # ---------------------------------------------------------------------------- PETSc TS
 def test_ts_alpha2_backend():
     """TS alpha2 with the same callbacks: Newmark parameters conserve the energy after the
