@@ -317,6 +317,7 @@ class ShellSystem:
         self.total_mass = m_tot
         self._blocks: np.ndarray | None = None
         self._blocks_at = np.zeros(0)
+        self._inverse: np.ndarray | None = None  # of the blocks at _blocks_at
 
     # state and loads
     def create_vector(self) -> PETSc.Vec:
@@ -377,7 +378,22 @@ class ShellSystem:
             T = self.model.director_jacobian()
             self._blocks = self.lumped_d[:, None, None] * np.einsum("nka,nkb->nab", T, T)
             self._blocks_at = th.copy()
+            self._inverse = None
         return self._blocks
+
+    def _theta_inverse(self) -> np.ndarray:
+        """Inverses of the 2x2 rotary blocks (Cramer's rule: one NumPy pass, no LAPACK call
+        per block); ``LinAlgError`` if a block is singular (det 0 or not finite)."""
+        B = self._theta_blocks()
+        if self._inverse is None:
+            a, b, c, d = B[:, 0, 0], B[:, 0, 1], B[:, 1, 0], B[:, 1, 1]
+            det = a * d - b * c
+            if not np.all(np.isfinite(det) & (det != 0.0)):
+                raise np.linalg.LinAlgError("a lumped 2x2 rotary block is singular")
+            inv = np.empty_like(B)
+            inv[:, 0, 0], inv[:, 0, 1], inv[:, 1, 0], inv[:, 1, 1] = d, -b, -c, a
+            self._inverse = inv / det[:, None, None]
+        return self._inverse
 
     def max_rotation(self) -> float:
         """The largest nodal director rotation |theta| [rad] over all ranks (collective)."""
@@ -392,7 +408,7 @@ class ShellSystem:
         term of a is neglected, as the gyroscopic inertia is)."""
         m, n = self.model, self.n
         th = m.theta.x.array[: 2 * n].reshape(n, 2)
-        T, _ = rotation.director_derivatives(m.basis[:n], th)
+        T = rotation.director_tangent(m.basis[:n], th)
         va, aa = v.getArray()[3 * n :].reshape(n, 2), a.getArray()[3 * n :].reshape(n, 2)
         d_rate = np.einsum("nka,na->nk", T, va)
         d_acc = np.einsum("nka,na->nk", T, aa)
@@ -410,8 +426,8 @@ class ShellSystem:
         n = self.n
         out = np.empty_like(f)
         out[: 3 * n] = f[: 3 * n] / self.lumped_u
-        B = self._theta_blocks()
-        out[3 * n :] = np.linalg.solve(B, f[3 * n :].reshape(n, 2, 1)).ravel()
+        Binv = self._theta_inverse()
+        out[3 * n :] = np.einsum("nab,nb->na", Binv, f[3 * n :].reshape(n, 2)).ravel()
         return out
 
     def lumped_mult(self, v: np.ndarray) -> np.ndarray:

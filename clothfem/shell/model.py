@@ -431,8 +431,9 @@ class ShellModel:
         self._Rw_at = None
         th = self.theta.x.array.reshape(-1, 2)
         self.d.x.array[:] = rotation.director(self.basis, th).ravel()
-        T, self._H = rotation.director_derivatives(self.basis[: self.n_owned], th[: self.n_owned])
         n = self.n_owned
+        T = rotation.director_tangent(self.basis[:n], th[:n])
+        self._H = None  # d2d/dtheta2: only the Jacobian needs it (_second_derivatives)
         self._T, self._T_at = T, th[:n].copy()
         self._P_data[3 * n :] = T.reshape(-1)  # rows (node, k), columns a
         self._P.setValuesCSR(self._P_indptr, self._P_indices, self._P_data)
@@ -444,9 +445,18 @@ class ShellModel:
         n = self.n_owned
         th = self.theta.x.array[: 2 * n].reshape(n, 2)
         if not np.array_equal(th, self._T_at):
-            self._T, _ = rotation.director_derivatives(self.basis[:n], th)
+            self._T = rotation.director_tangent(self.basis[:n], th)
             self._T_at = th.copy()
         return self._T
+
+    def _second_derivatives(self) -> np.ndarray:
+        """d2d_A/dtheta_A^2 (n_owned, 3, 2, 2) at the rotations of the last
+        :meth:`update_director` (computed on the first call after it)."""
+        if self._H is None:
+            n = self.n_owned
+            th = self.theta.x.array[: 2 * n].reshape(n, 2)
+            self._H = rotation.director_derivatives(self.basis[:n], th)[1]
+        return self._H
 
     def rebase(self, *, threshold: float = 0.5) -> np.ndarray:
         """Re-base the fibre basis of every node with |theta| > ``threshold`` [rad] on its
@@ -577,7 +587,7 @@ class ShellModel:
         # geometric term of the nodal rotation map
         n = self.n_owned
         Rd = Rw.getArray(readonly=True)[3 * n : 6 * n].reshape(n, 3)
-        G = np.einsum("nk,nkab->nab", Rd, self._H)
+        G = np.einsum("nk,nkab->nab", Rd, self._second_derivatives())
         self._G.setValuesCSR(self._G_indptr, self._G_indices, G.reshape(-1))
         self._G.assemble()
         K.axpy(1.0, self._G, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)

@@ -22,6 +22,7 @@ __all__ = [
     "fibre_basis",
     "director",
     "director_derivatives",
+    "director_tangent",
     "rotation_from_director",
     "rotation_matrix",
 ]
@@ -80,12 +81,22 @@ def director(basis: np.ndarray, theta: np.ndarray) -> np.ndarray:
     return np.cos(phi) * e3 + s * (t2 * e1 - t1 * e2)
 
 
+def director_tangent(basis: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """``T`` (N, 3, 2), T[:, :, a] = dd/dtheta_a of :func:`director` (the first part of
+    :func:`director_derivatives`, the same numbers, without the second derivatives)."""
+    return _derivatives(basis, theta, second=False)[0]
+
+
 def director_derivatives(basis: np.ndarray, theta: np.ndarray):
     """First and second derivatives of :func:`director` w.r.t. (theta1, theta2).
 
     Returns ``T`` (N, 3, 2) with T[:, :, a] = dd/dtheta_a and ``H`` (N, 3, 2, 2) with
     H[:, :, a, b] = d2d/dtheta_a dtheta_b.
     """
+    return _derivatives(basis, theta, second=True)
+
+
+def _derivatives(basis: np.ndarray, theta: np.ndarray, *, second: bool):
     e1, e2, e3 = basis[:, 0], basis[:, 1], basis[:, 2]
     th = theta
     phi = np.hypot(th[:, 0], th[:, 1])[:, None]
@@ -94,11 +105,11 @@ def director_derivatives(basis: np.ndarray, theta: np.ndarray):
     wa = (-e2, e1)  # dw/dtheta_a
     n = len(th)
     T = np.empty((n, 3, 2))
-    H = np.empty((n, 3, 2, 2))
+    H = np.empty((n, 3, 2, 2)) if second else None
     for a in range(2):
         ta = th[:, a : a + 1]
         T[:, :, a] = -s * ta * e3 + q * ta * w + s * wa[a]
-        for b in range(2):
+        for b in range(2 if second else 0):
             tb = th[:, b : b + 1]
             dab = 1.0 if a == b else 0.0
             H[:, :, a, b] = (

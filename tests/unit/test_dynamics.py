@@ -267,6 +267,29 @@ def test_shell_mass_rigid_motions(strip_system):
     assert np.all(s.lumped_u > 0) and np.all(s.lumped_d > 0)
 
 
+def test_lumped_solve_inverts_lumped_mult_at_large_rotations():
+    """M_L^-1 (M_L v) = v with the rotary blocks m T^T T at rotations up to 2.5 rad (their
+    inverses by Cramer's rule), against LAPACK's solve of the same blocks; a singular block
+    raises LinAlgError (as LAPACK's solve did)."""
+    sm = meshes.strip(COMM, length=2.0, width=0.5, nx=4, ny=2)
+    mat = FabricMaterial.isotropic(E=1.0e6, nu=0.3, rho=400.0)
+    s = dy.ShellSystem(ShellModel(sm, material=mat, thickness=0.02))
+    n = s.n
+    rng = np.random.default_rng(4 + COMM.rank)
+    th = s.model.theta.x.array[: 2 * n].reshape(n, 2)
+    th[:] = rng.uniform(-1.8, 1.8, (n, 2))
+    v = rng.normal(size=5 * n)
+    back = s.lumped_solve(s.lumped_mult(v))
+    np.testing.assert_allclose(back, v, rtol=0, atol=1e-12 * np.abs(v).max())
+    f = rng.normal(size=5 * n)
+    ref = np.linalg.solve(s._theta_blocks(), f[3 * n :].reshape(n, 2, 1)).ravel()
+    np.testing.assert_allclose(s.lumped_solve(f)[3 * n :], ref, rtol=1e-12)
+    s._theta_blocks()[0] = [[1.0, 2.0], [2.0, 4.0]]  # rank 1 (cached at these rotations)
+    s._inverse = None
+    with pytest.raises(np.linalg.LinAlgError, match="rotary block is singular"):
+        s.lumped_solve(f)
+
+
 def test_shell_stable_step_bounds(strip_system):
     st = dy.stable_time_step(strip_system, iterations=1000)
     assert 0 < st.dt_bound <= st.dt_crit < math.inf
