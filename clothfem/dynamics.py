@@ -267,6 +267,15 @@ def _global_sum(comm, value: float) -> float:
     return comm.allreduce(float(value), op=MPI.SUM)
 
 
+def _block_mult(B: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Blockwise B_A x_A of 2x2 blocks B (n, 2, 2) and x (2 n,) -> (2 n,)."""
+    x0, x1 = x[0::2], x[1::2]
+    out = np.empty_like(x)
+    out[0::2] = B[:, 0, 0] * x0 + B[:, 0, 1] * x1
+    out[1::2] = B[:, 1, 0] * x0 + B[:, 1, 1] * x1
+    return out
+
+
 class ShellSystem:
     """The nonlinear :class:`ShellModel` with its inertia, as seen by the integrators.
 
@@ -376,7 +385,12 @@ class ShellSystem:
         th = self.model.theta.x.array[: 2 * n]
         if self._blocks is None or not np.array_equal(th, self._blocks_at):
             T = self.model.director_jacobian()
-            self._blocks = self.lumped_d[:, None, None] * np.einsum("nka,nkb->nab", T, T)
+            t1, t2 = T[:, :, 0], T[:, :, 1]  # (component formulas: einsum is ~4x slower here)
+            B = np.empty((n, 2, 2))
+            B[:, 0, 0] = (t1 * t1).sum(axis=1)
+            B[:, 0, 1] = B[:, 1, 0] = (t1 * t2).sum(axis=1)
+            B[:, 1, 1] = (t2 * t2).sum(axis=1)
+            self._blocks = self.lumped_d[:, None, None] * B
             self._blocks_at = th.copy()
             self._inverse = None
         return self._blocks
@@ -426,17 +440,14 @@ class ShellSystem:
         n = self.n
         out = np.empty_like(f)
         out[: 3 * n] = f[: 3 * n] / self.lumped_u
-        Binv = self._theta_inverse()
-        out[3 * n :] = np.einsum("nab,nb->na", Binv, f[3 * n :].reshape(n, 2)).ravel()
+        out[3 * n :] = _block_mult(self._theta_inverse(), f[3 * n :])
         return out
 
     def lumped_mult(self, v: np.ndarray) -> np.ndarray:
         n = self.n
         out = np.empty_like(v)
         out[: 3 * n] = v[: 3 * n] * self.lumped_u
-        out[3 * n :] = np.einsum(
-            "nab,nb->na", self._theta_blocks(), v[3 * n :].reshape(n, 2)
-        ).ravel()
+        out[3 * n :] = _block_mult(self._theta_blocks(), v[3 * n :])
         return out
 
     def lumped_min(self) -> np.ndarray:

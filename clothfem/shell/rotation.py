@@ -30,23 +30,28 @@ __all__ = [
 _SMALL = 0.3
 
 
-def _coefficients(phi: np.ndarray):
-    """s = sin(phi)/phi, q = s'(phi)/phi, p = q'(phi)/phi, robust near phi = 0."""
+def _coefficients(phi: np.ndarray, upto: int = 3):
+    """s = sin(phi)/phi, q = s'(phi)/phi, p = q'(phi)/phi, robust near phi = 0; the first
+    ``upto`` of them (the others are None)."""
     small = phi < _SMALL
     ps = np.where(small, 1.0, phi)  # safe denominator
-    sin, cos = np.sin(ps), np.cos(ps)
+    sin = np.sin(ps)
+    cos = np.cos(ps) if upto > 1 else None
     x = phi * phi  # Taylor series in x = phi^2, truncation error < 1e-15 for phi < 0.3
     s = np.where(small, 1 - x / 6 + x**2 / 120 - x**3 / 5040 + x**4 / 362880, sin / ps)
-    q = np.where(
-        small,
-        -1 / 3 + x / 30 - x**2 / 840 + x**3 / 45360 - x**4 / 3991680,
-        (ps * cos - sin) / ps**3,
-    )
-    p = np.where(
-        small,
-        1 / 15 - x / 210 + x**2 / 7560 - x**3 / 498960 + x**4 / 51891840,
-        (3.0 * sin - 3.0 * ps * cos - ps * ps * sin) / ps**5,
-    )
+    q = p = None
+    if upto > 1:
+        q = np.where(
+            small,
+            -1 / 3 + x / 30 - x**2 / 840 + x**3 / 45360 - x**4 / 3991680,
+            (ps * cos - sin) / ps**3,
+        )
+    if upto > 2:
+        p = np.where(
+            small,
+            1 / 15 - x / 210 + x**2 / 7560 - x**3 / 498960 + x**4 / 51891840,
+            (3.0 * sin - 3.0 * ps * cos - ps * ps * sin) / ps**5,
+        )
     return s, q, p
 
 
@@ -77,7 +82,7 @@ def director(basis: np.ndarray, theta: np.ndarray) -> np.ndarray:
     e1, e2, e3 = basis[:, 0], basis[:, 1], basis[:, 2]
     t1, t2 = theta[:, 0:1], theta[:, 1:2]
     phi = np.hypot(t1, t2)
-    s, _, _ = _coefficients(phi)
+    s, _, _ = _coefficients(phi, upto=1)
     return np.cos(phi) * e3 + s * (t2 * e1 - t1 * e2)
 
 
@@ -100,7 +105,7 @@ def _derivatives(basis: np.ndarray, theta: np.ndarray, *, second: bool):
     e1, e2, e3 = basis[:, 0], basis[:, 1], basis[:, 2]
     th = theta
     phi = np.hypot(th[:, 0], th[:, 1])[:, None]
-    s, q, p = _coefficients(phi)
+    s, q, p = _coefficients(phi, upto=3 if second else 2)
     w = th[:, 1:2] * e1 - th[:, 0:1] * e2  # |w| = phi
     wa = (-e2, e1)  # dw/dtheta_a
     n = len(th)
@@ -143,7 +148,7 @@ def rotation_matrix(rotvec: np.ndarray) -> np.ndarray:
     """Euler's formula (Eq. 7): rotation matrices (N, 3, 3) from rotation vectors (N, 3)."""
     rv = np.atleast_2d(np.asarray(rotvec, dtype=float))
     phi = np.linalg.norm(rv, axis=1)
-    s, _, _ = _coefficients(phi[:, None])
+    s, _, _ = _coefficients(phi[:, None], upto=1)
     safe = np.where(phi < _SMALL, 1.0, phi)
     x = phi * phi
     c2 = np.where(
