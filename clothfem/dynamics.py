@@ -366,7 +366,7 @@ class ShellSystem:
 
     def mass_mult(self, a: PETSc.Vec, out: PETSc.Vec) -> None:
         """out = M(x) a at the current state of the model."""
-        P = self.model._P
+        P = self.model.rotation_map()
         P.mult(a, self._w1)
         self._Mw.mult(self._w1, self._w2)
         P.multTranspose(self._w2, out)
@@ -374,9 +374,9 @@ class ShellSystem:
     def mass_matrix(self) -> PETSc.Mat:
         """M(x) = P^T M_w P at the current state (the matrix is reused)."""
         if self._M is None:
-            self._M = self._Mw.ptap(self.model._P)
+            self._M = self._Mw.ptap(self.model.rotation_map())
         else:
-            self._Mw.ptap(self.model._P, result=self._M)
+            self._Mw.ptap(self.model.rotation_map(), result=self._M)
         return self._M
 
     def _theta_blocks(self) -> np.ndarray:

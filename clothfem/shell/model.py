@@ -410,6 +410,7 @@ class ShellModel:
         P.setPreallocationCSR((self._P_indptr, self._P_indices, self._P_data))
         P.assemble()
         self._P = P
+        self._P_stale = False  # True: _P_data holds newer values than the matrix
         self._f_ext = P.createVecRight()
         self._f_ext_lam: float | None = None  # the load factor f_ext was assembled at
         self._fe_work = P.createVecRight()
@@ -436,8 +437,17 @@ class ShellModel:
         self._H = None  # d2d/dtheta2: only the Jacobian needs it (_second_derivatives)
         self._T, self._T_at = T, th[:n].copy()
         self._P_data[3 * n :] = T.reshape(-1)  # rows (node, k), columns a
-        self._P.setValuesCSR(self._P_indptr, self._P_indices, self._P_data)
-        self._P.assemble()
+        self._P_stale = True  # the matrix P gets these values when it is used (rotation_map)
+
+    def rotation_map(self) -> PETSc.Mat:
+        """P = d(u, d)/d(u, theta) at the current rotations, as a matrix (its values set on
+        the first call after :meth:`update_director`; collective, as its users are: the
+        tangent P^T K_w P, the consistent mass). The residual applies P^T without it."""
+        if self._P_stale:
+            self._P.setValuesCSR(self._P_indptr, self._P_indices, self._P_data)
+            self._P.assemble()
+            self._P_stale = False
+        return self._P
 
     def director_jacobian(self) -> np.ndarray:
         """dd_A/dtheta_A (n_owned, 3, 2) at the current rotations (from the last
@@ -568,7 +578,16 @@ class ShellModel:
         self._f_ext.copy(fe)
         if self._Ffollow_form is not None:  # state-dependent: at x (set above)
             fe.getArray()[: 3 * self.n_owned] += _assemble_owned(self._Ffollow_form)
-        self._P.multTranspose(self._Rw, r)
+        # r = P^T R_w, node by node (P is block diagonal: identity on u, T_A^T on d_A), in the
+        # summation order of the sparse transpose product it replaces (same bits)
+        n = self.n_owned
+        rw = self._Rw.getArray(readonly=True)
+        ra = r.getArray()
+        ra[: 3 * n] = rw[: 3 * n]
+        rd, T = rw[3 * n : 6 * n].reshape(n, 3), self._T
+        for a in range(2):
+            t = T[:, :, a]
+            ra[3 * n + a :: 2] = t[:, 0] * rd[:, 0] + t[:, 1] * rd[:, 1] + t[:, 2] * rd[:, 2]
         r.axpy(-1.0, fe)
 
     def jacobian(self, x: PETSc.Vec, K: PETSc.Mat | None = None) -> PETSc.Mat:
@@ -579,11 +598,11 @@ class ShellModel:
         fem_petsc.assemble_matrix_block(self._Kw, self._K_forms, bcs=[])
         self._Kw.assemble()
         if K is None:
-            K = self._Kw.ptap(self._P)
+            K = self._Kw.ptap(self.rotation_map())
             K.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
             K.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
         else:
-            self._Kw.ptap(self._P, result=K)
+            self._Kw.ptap(self.rotation_map(), result=K)
         # geometric term of the nodal rotation map
         n = self.n_owned
         Rd = Rw.getArray(readonly=True)[3 * n : 6 * n].reshape(n, 3)
