@@ -14,6 +14,7 @@ Conventions (used throughout :mod:`clothfem.body`)
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -32,12 +33,19 @@ def check_rotation(q: ArrayLike, *, what: str, tol: float = 1e-6) -> NDArray[np.
     a = np.asarray(q, dtype=float)
     if a.shape != (3, 3):
         raise ValueError(f"{what}: must have shape (3, 3), got {a.shape}")
-    if not np.all(np.isfinite(a)):
+    # on the nine Python floats: a few NumPy calls on a 3x3 cost more than the arithmetic
+    rows = a.tolist()
+    if not all(math.isfinite(x) for row in rows for x in row):
         raise ValueError(f"{what}: must be finite, got NaN/inf entries")
-    err = float(np.max(np.abs(a.T @ a - np.eye(3))))
+    cols = list(zip(*rows, strict=True))
+    err = max(
+        abs(sum(p * q for p, q in zip(cols[i], cols[j], strict=True)) - (i == j))
+        for i in range(3)
+        for j in range(i, 3)
+    )
     if err > tol:
         raise ValueError(f"{what}: must be orthonormal (|Q^T Q - I| <= {tol:g}), got {err:.3g}")
-    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = a.tolist()
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = rows
     det = (
         a00 * (a11 * a22 - a12 * a21)
         - a01 * (a10 * a22 - a12 * a20)
@@ -52,7 +60,7 @@ def _vec3(v: ArrayLike, *, what: str) -> NDArray[np.float64]:
     a = np.asarray(v, dtype=float)
     if a.shape != (3,):
         raise ValueError(f"{what}: must have shape (3,), got {a.shape}")
-    if not np.all(np.isfinite(a)):
+    if not all(math.isfinite(x) for x in a.tolist()):
         raise ValueError(f"{what}: must be finite, got {tuple(float(x) for x in a)}")
     return a
 

@@ -19,8 +19,6 @@ import tempfile
 from functools import cache
 from pathlib import Path
 
-import numpy as np
-
 __all__ = ["KernelBuildError", "film_kernel"]
 
 _SOURCE = Path(__file__).with_name("film_kernel.c")
@@ -63,21 +61,7 @@ def _build(src: Path) -> Path:
     return lib
 
 
-_D = np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS")
-_B = np.ctypeslib.ndpointer(dtype=np.uint8, flags="C_CONTIGUOUS")
-_I = np.ctypeslib.ndpointer(dtype=np.int64, flags="C_CONTIGUOUS")
-_L, _F, _INT = ctypes.c_long, ctypes.c_double, ctypes.c_int
-
-
-class _MaskOrNone:
-    """ctypes argument: a C-contiguous uint8 array, or None for a NULL pointer."""
-
-    @classmethod
-    def from_param(cls, a):
-        return None if a is None else _B.from_param(a)
-
-
-_MASK = _MaskOrNone
+_P, _L, _F, _INT = ctypes.c_void_p, ctypes.c_long, ctypes.c_double, ctypes.c_int
 
 
 @cache
@@ -87,8 +71,10 @@ def film_kernel():
     fn = ctypes.CDLL(str(_build(_SOURCE))).film_correct
     fn.restype = ctypes.c_int
     # n, xs, vs, m, dt, K, c, Q, r, vc, om, has_mu, mu, offset, max_passes, tol, max_iter,
-    # gap_tol, fixed (uint8 mask or None), then the outputs x, v, active, lam_n, force,
-    # friction, normal, body, gap, stick, dissipation, unresolved
-    fn.argtypes = [_L, _D, _D, _D, _F, _L, _D, _D, _D, _D, _D, _INT, _F, _F, _L, _F, _L, _F]
-    fn.argtypes += [_MASK, _D, _D, _B, _D, _D, _D, _D, _I, _D, _B, _D, _B]
+    # gap_tol, fixed (uint8 mask or NULL), then the outputs x, v, active, lam_n, force,
+    # friction, normal, body, gap, stick, dissipation, unresolved. Arrays are passed as
+    # addresses of C-contiguous float64 (int64 body, uint8 flags) arrays: the caller
+    # (clothfem.contact.explicit._film_compiled) makes them so
+    fn.argtypes = [_L, _P, _P, _P, _F, _L, _P, _P, _P, _P, _P, _INT, _F, _F, _L, _F, _L, _F]
+    fn.argtypes += [_P] * 13
     return fn

@@ -259,6 +259,30 @@ def film_step(
     return full
 
 
+class _Buffers:
+    """Output arrays of the C loop for ``n`` nodes and their addresses, allocated once;
+    ``result`` is the :class:`FilmResult` of views into them."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        x, v, force, friction, normal = (np.empty((n, 3)) for _ in range(5))
+        lam_n, gap, dissipation = np.empty(n), np.empty(n), np.empty(n)
+        active, stick, unresolved = (np.zeros(n, dtype=np.uint8) for _ in range(3))
+        body = np.empty(n, dtype=np.int64)
+        order = (x, v, active, lam_n, force, friction, normal, body, gap, stick, dissipation)
+        self.ptrs = tuple(a.ctypes.data for a in (*order, unresolved))
+        self.result = FilmResult(
+            x, v, active.view(bool), lam_n, force, friction, normal, body.view(np.intp), gap,
+            stick.view(bool), dissipation, unresolved.view(bool),
+        )  # fmt: skip
+
+
+def _ptr(a: np.ndarray, dtype=np.float64) -> tuple[np.ndarray, int]:
+    """``a`` as a C-contiguous array of ``dtype`` (a copy only if needed) and its address."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return a, a.ctypes.data
+
+
 def _film_compiled(
     xs: FloatArray,
     vs: FloatArray,
@@ -271,61 +295,21 @@ def _film_compiled(
     offset: float,
     max_passes: int,
     fixed: NDArray[np.bool_] | None,
+    buffers: _Buffers | None = None,
 ) -> FilmResult:
-    """:func:`film_step` by the C loop of ``film_kernel.c`` (validated input)."""
+    """:func:`film_step` by the C loop of ``film_kernel.c`` (validated input); into
+    ``buffers`` (then the result's arrays are overwritten by the next call) or new arrays."""
     n, k = xs.shape[0], len(ells)
-    c, Q, r = (np.ascontiguousarray(a) for a in (ells.c, ells.Q, ells.r))
-    x, v, force, friction, normal = (np.empty((n, 3)) for _ in range(5))
-    lam_n, gap, dissipation = np.empty(n), np.empty(n), np.empty(n)
-    active, stick, unresolved = (np.empty(n, dtype=np.uint8) for _ in range(3))
-    body = np.empty(n, dtype=np.int64)
+    out = buffers if buffers is not None and buffers.n == n else _Buffers(n)
+    keep = [_ptr(a) for a in (xs, vs, mass, ells.c, ells.Q, ells.r, vc, om)]  # alive in call
+    fx = None if fixed is None else _ptr(fixed.view(np.uint8), np.uint8)
+    (_, px), (_, pv), (_, pm), (_, pc), (_, pQ), (_, pr), (_, pvc), (_, pom) = keep
     film_kernel()(
-        n,
-        np.ascontiguousarray(xs),
-        np.ascontiguousarray(vs),
-        np.ascontiguousarray(mass),
-        dt,
-        k,
-        c,
-        Q,
-        r,
-        np.ascontiguousarray(vc),
-        np.ascontiguousarray(om),
-        int(mu is not None),
-        0.0 if mu is None else float(mu),
-        offset,
-        max_passes,
-        _PROJ_TOL,
-        _PROJ_MAX_ITER,
-        _GAP_TOL,
-        None if fixed is None else np.ascontiguousarray(fixed).view(np.uint8),
-        x,
-        v,
-        active,
-        lam_n,
-        force,
-        friction,
-        normal,
-        body,
-        gap,
-        stick,
-        dissipation,
-        unresolved,
-    )
-    return FilmResult(
-        x,
-        v,
-        active.view(bool),
-        lam_n,
-        force,
-        friction,
-        normal,
-        body.astype(np.intp, copy=False),
-        gap,
-        stick.view(bool),
-        dissipation,
-        unresolved.view(bool),
-    )
+        n, px, pv, pm, dt, k, pc, pQ, pr, pvc, pom,
+        int(mu is not None), 0.0 if mu is None else float(mu), offset, max_passes,
+        _PROJ_TOL, _PROJ_MAX_ITER, _GAP_TOL, None if fx is None else fx[1], *out.ptrs,
+    )  # fmt: skip
+    return out.result
 
 
 def _film_numpy(

@@ -27,8 +27,9 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from .explicit import FilmResult, film_step
+from .explicit import FilmResult, _Buffers, _check_velocities, _film_compiled, film_step
 from .forces import joint_torque
+from .geometry import _check_bodies
 
 __all__ = ["FilmParameters", "FilmContact", "FilmRecord", "body_state"]
 
@@ -102,7 +103,10 @@ class FilmContact:
         self.bodies_at, self.params = bodies_at, params
         n = self.n = self.model.n_owned
         self.X = self.model.x_nodes[:n]
-        self.mass = np.asarray(system.lumped_u[0 : 3 * n : 3])  # kg per node
+        self.mass = np.ascontiguousarray(system.lumped_u[0 : 3 * n : 3])  # kg per node
+        if not (np.all(np.isfinite(self.mass)) and np.all(self.mass > 0.0)):
+            raise ValueError("FilmContact: the lumped nodal masses must be finite and > 0 kg")
+        self._buffers = _Buffers(n)  # the compiled step's outputs (reused every step)
         self.last: FilmResult | None = None
         self.history: list[FilmRecord] = []  # one record per collect()
         self.dissipation_total = 0.0  # frictional dissipation up to the last collect() [J]
@@ -128,19 +132,30 @@ class FilmContact:
         v = v_pred.getArray(readonly=True)[: 3 * n].reshape(n, 3)
         geo, vel = self.bodies_at(t)
         p = self.params
-        res = film_step(
-            self.X + u,
-            v,
-            self.mass,
-            h,
-            geo,
-            body_velocities=vel,
-            mu=p.mu,
-            offset=p.offset,
-            max_passes=p.max_passes,
-            fixed=self._fixed,
-            kernel=p.kernel,
-        )
+        if p.kernel == "compiled":
+            # film_step's C path without its per-call checks of what does not change (masses,
+            # fixed nodes, parameters: checked once) and into output arrays allocated once
+            ells = _check_bodies(geo)
+            vc, om = _check_velocities(vel, len(ells))
+            xs = self.X + u
+            res = _film_compiled(
+                xs, v, self.mass, h, ells, vc, om, p.mu, p.offset, p.max_passes, self._fixed,
+                self._buffers,
+            )  # fmt: skip
+        else:
+            res = film_step(
+                self.X + u,
+                v,
+                self.mass,
+                h,
+                geo,
+                body_velocities=vel,
+                mu=p.mu,
+                offset=p.offset,
+                max_passes=p.max_passes,
+                fixed=self._fixed,
+                kernel=p.kernel,
+            )
         act = np.flatnonzero(res.active)
         u[act] = res.x[act] - self.X[act]  # the other nodes' unknowns are left bit for bit
         self.last, self._act = res, act
