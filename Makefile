@@ -66,7 +66,7 @@ extreme: env
 ## make bench-arm: per-step time split and the 2-rank speed-up (benchmarks/arm_perf.py)
 bench-arm: env
 	$(PY) benchmarks/arm_perf.py --out $(OUT)/arm-perf
-	$(PY) benchmarks/arm_perf.py --integrator explicit --meshes 16x20 32x40 --angle 10 \
+	$(PY) benchmarks/arm_perf.py --integrator explicit --meshes 16x20 24x30 32x40 --angle 10 \
 		--kernels numpy compiled --out $(OUT)/arm-perf-explicit
 
 ## make verification: the README's shell verification table (results/verification.md)

@@ -17,7 +17,7 @@ MUMPS's distributed LU (``-contact_lagrange_pc_type lu``). Writes `OUT/arm_perf.
 `OUT/arm_perf.md`.
 
     .venv/bin/python benchmarks/arm_perf.py --out results/arm-perf [--meshes 8x10 16x20]
-    .venv/bin/python benchmarks/arm_perf.py --integrator explicit --meshes 16x20 32x40 \
+    .venv/bin/python benchmarks/arm_perf.py --integrator explicit --meshes 16x20 24x30 32x40 \
         --angle 10 --out results/arm-perf-explicit
 
 With ``--integrator explicit`` (central difference + FILM: no linear solve) the split is
@@ -26,7 +26,7 @@ predictor) and there is one 2-rank run per mesh. ``--kernels numpy compiled`` ru
 explicit case with each implementation of the FILM correction (``contact.kernel``) and
 reports the contact-layer and wall-time ratios of the two in the same run:
 
-    .venv/bin/python benchmarks/arm_perf.py --integrator explicit --meshes 16x20 32x40 \
+    .venv/bin/python benchmarks/arm_perf.py --integrator explicit --meshes 16x20 24x30 32x40 \
         --angle 10 --kernels numpy compiled --out results/arm-perf-explicit
 """
 
