@@ -318,9 +318,17 @@ def report_markdown(run_dir: str | Path) -> str:
     lines += [f"- {label}: {v:{spec}}{unit}" for label, v, spec, unit in facts if v is not None]
     timers = {k[2:]: float(np.nansum(h[k])) for k in TIMERS if k in h and h[k].dtype.kind == "f"}
     total = sum(timers.values())
+    wall = num("wall_time", lambda c: c[-1], "elapsed")
     if timers and total > 0:
-        shares = ", ".join(f"{k} {100 * v / total:.1f} %" for k, v in timers.items())
-        lines.append(f"- time shares: {shares}")
+        # of the run's wall time when known (the rest, "other", is what no timer covers: the
+        # explicit step itself, the CSV, pictures), else of the timed parts
+        whole = wall if wall is not None and wall >= total else total
+        shares = ", ".join(f"{k} {100 * v / whole:.1f} %" for k, v in timers.items())
+        of = "of the timed parts"
+        if whole > total:
+            shares += f", other {100 * (whole - total) / whole:.1f} %"
+            of = "of the wall time"
+        lines.append(f"- time shares {of}: {shares}")
     flex = torque_curve(h, "torque_flex") if "torque_flex" in h else None
     head = "| angle [deg] | torque_mag [N m] |" + (" -torque_flex [N m] |" if flex else "")
     lines += ["", head, "|---|---|" + ("---|" if flex else "")]

@@ -196,6 +196,16 @@ def test_report_text(tmp_path, capsys):
         assert expected in text, expected
 
 
+def test_report_time_shares_of_the_wall_time(tmp_path, capsys):
+    """With a wall time above the timed parts (the explicit runs time only contact and
+    output), the shares are of the wall time and the rest is "other"."""
+    d = _run(tmp_path / "run", summary=dict(STOPPED, wall_time=80.0))
+    assert main(["report", str(d)]) == 0
+    text = capsys.readouterr().out
+    expected = "time shares of the wall time: assembly 12.5 %, solve 25.0 %, contact 12.5 %, "
+    assert expected + "io 0.0 %, other 50.0 %" in text
+
+
 def test_report_without_summary_or_optional_columns(tmp_path, capsys):
     required = ["stage", "time", "angle_deg", "torque_mag", "newton_iterations", "elapsed"]
     d = _run(tmp_path / "bare", columns=required)
