@@ -67,7 +67,7 @@ extreme: env
 bench-arm: env
 	$(PY) benchmarks/arm_perf.py --out $(OUT)/arm-perf
 	$(PY) benchmarks/arm_perf.py --integrator explicit --meshes 16x20 24x30 32x40 --angle 10 \
-		--kernels numpy compiled --out $(OUT)/arm-perf-explicit
+		--kernels numpy compiled --repeat 3 --out $(OUT)/arm-perf-explicit
 
 ## make verification: the README's shell verification table (results/verification.md)
 verification: env

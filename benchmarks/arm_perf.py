@@ -24,10 +24,11 @@ With ``--integrator explicit`` (central difference + FILM: no linear solve) the 
 contact / io / other (other = the explicit step itself: forces, lumped solve, the
 predictor) and there is one 2-rank run per mesh. ``--kernels numpy compiled`` runs every
 explicit case with each implementation of the FILM correction (``contact.kernel``) and
-reports the contact-layer and wall-time ratios of the two in the same run:
+reports the contact-layer and wall-time ratios of the two in the same run (``--repeat N``:
+every case N times, the row of median wall time, ratios of medians):
 
     .venv/bin/python benchmarks/arm_perf.py --integrator explicit --meshes 16x20 24x30 32x40 \
-        --angle 10 --kernels numpy compiled --out results/arm-perf-explicit
+        --angle 10 --kernels numpy compiled --repeat 3 --out results/arm-perf-explicit
 """
 
 import argparse
@@ -109,22 +110,41 @@ def main() -> None:
         default=["compiled"],
         help="explicit: run every case with each FILM implementation (contact.kernel)",
     )
+    ap.add_argument(
+        "--repeat",
+        type=int,
+        default=1,
+        help="runs of every case; its row is the run of median wall time, with the min and "
+        "max (wall_min_s, wall_max_s), and ratios are of medians (run times vary by 10-25 %% "
+        "from run to run on a shared machine)",
+    )
     args = ap.parse_args()
+    if args.repeat < 1:
+        ap.error(f"--repeat must be >= 1, got {args.repeat}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     kernels = args.kernels if args.integrator == "explicit" else ["compiled"]
+
+    def median_run(path: Path, *case) -> dict:
+        runs = [
+            run(path.with_name(path.name + (f"_r{i}" if args.repeat > 1 else "")), *case)
+            for i in range(args.repeat)
+        ]
+        walls = sorted(r["wall_s"] for r in runs)
+        row = sorted(runs, key=lambda r: r["wall_s"])[(len(runs) - 1) // 2]
+        return row | {"wall_min_s": walls[0], "wall_max_s": walls[-1], "runs": len(runs)}
+
     for mesh in args.meshes:
         for kernel in kernels:
             tag = f"_{kernel}" if len(kernels) > 1 else ""
-            one = run(
-                out / f"{mesh}_np1{tag}", mesh, args.angle, 1, "redundant", args.integrator, kernel
-            )
+            case = (mesh, args.angle, 1, "redundant", args.integrator, kernel)
+            one = median_run(out / f"{mesh}_np1{tag}", *case)
             rows.append(one)
             solves = list(SOLVES) if args.integrator == "newmark" else ["redundant"]
             for solve in solves:
                 path = out / f"{mesh}_np2_{solve}{tag}"
-                two = run(path, mesh, args.angle, 2, solve, args.integrator, kernel)
+                two = median_run(path, mesh, args.angle, 2, solve, args.integrator, kernel)
                 two["speedup"] = one["wall_s"] / two["wall_s"]
                 if one["newton"] and two["newton"]:
                     two["speedup_per_newton"] = one["ms_per_newton"] / two["ms_per_newton"]
@@ -142,7 +162,8 @@ def main() -> None:
         w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
         w.writerows(rows)
-    cols = ["mesh", "ranks", "solve", "kernel", "wall_s", "steps", "newton", "ms_per_newton"]
+    cols = ["mesh", "ranks", "solve", "kernel", "wall_s", "wall_min_s", "wall_max_s", "runs"]
+    cols += ["steps", "newton", "ms_per_newton"]
     cols += ["ms_per_step", "assembly_pct", "contact_s"]
     cols += ["contact_pct", "solve_pct", "io_pct", "other_pct", "speedup", "speedup_per_newton"]
     cols += [c for c in keys if c.startswith(("contact_vs_", "wall_vs_"))]
