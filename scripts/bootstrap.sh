@@ -7,8 +7,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# gcc: dolfinx's form compiler and clothfem's contact loop (clothfem/contact/compiled.py)
+# compile C at run time
 APT_PKGS=(python3-dolfinx python3-gmsh python3-meshio python3-mpi4py python3-petsc4py
-          python3-ufl python3-scipy python3-venv libopenblas0-pthread)
+          python3-ufl python3-scipy python3-venv libopenblas0-pthread gcc)
 
 missing=()
 for p in "${APT_PKGS[@]}"; do
