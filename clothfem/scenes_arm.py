@@ -851,6 +851,11 @@ def _run_explicit(
     pressure.name = "contact_pressure"  # Pa, nodal (lam / reference lumped area), last step
     model.u.name = "displacement"
     interval = o["interval"]
+
+    def ends_row(t: float) -> bool:
+        """The step to ``t`` ends a history row (one row per interval, and the last step)."""
+        return t >= (state["row"] + 1) * interval - 1e-12 or t >= t_end - 1e-12
+
     acc = {"tau": np.zeros(3), "res": np.zeros(3), "n": 0}
     xdmf_name = "fabric" if keep is None else f"fabric_resumed_{start['step']:06d}"
 
@@ -888,7 +893,7 @@ def _run_explicit(
             acc["tau"] += tau_local
             acc["res"] += res_local
             acc["n"] += 1
-            if r.time < (state["row"] + 1) * interval - 1e-12 and r.time < t_end - 1e-12:
+            if not ends_row(r.time):
                 return
             h = fc.collect()  # the contact diagnostics of the row's steps (collective)
             state["row"] += 1
@@ -969,10 +974,7 @@ def _run_explicit(
                 velocity=start["v"],
                 acceleration=start["a"],
                 on_state=on_state,
-                # the strain energy only on the steps that end a history row (on_step's test)
-                measure=lambda _k, t: (
-                    t >= (state["row"] + 1) * interval - 1e-12 or t >= t_end - 1e-12
-                ),
+                measure=lambda _k, t: ends_row(t),  # the strain energy only for the rows
             )
             snapshot("final", t_end)
         except (DynamicsDivergence, FloatingPointError) as exc:

@@ -277,12 +277,6 @@ class _Buffers:
         )  # fmt: skip
 
 
-def _ptr(a: np.ndarray, dtype=np.float64) -> tuple[np.ndarray, int]:
-    """``a`` as a C-contiguous array of ``dtype`` (a copy only if needed) and its address."""
-    a = np.ascontiguousarray(a, dtype=dtype)
-    return a, a.ctypes.data
-
-
 def _film_compiled(
     xs: FloatArray,
     vs: FloatArray,
@@ -301,13 +295,17 @@ def _film_compiled(
     ``buffers`` (then the result's arrays are overwritten by the next call) or new arrays."""
     n, k = xs.shape[0], len(ells)
     out = buffers if buffers is not None and buffers.n == n else _Buffers(n)
-    keep = [_ptr(a) for a in (xs, vs, mass, ells.c, ells.Q, ells.r, vc, om)]  # alive in call
-    fx = None if fixed is None else _ptr(fixed.view(np.uint8), np.uint8)
-    (_, px), (_, pv), (_, pm), (_, pc), (_, pQ), (_, pr), (_, pvc), (_, pom) = keep
+    # C-contiguous float64 copies only where needed; kept referenced for the call
+    xs, vs, mass, c, Q, r, vc, om = (
+        np.ascontiguousarray(a, dtype=float) for a in (xs, vs, mass, ells.c, ells.Q, ells.r, vc, om)
+    )
+    mask = None if fixed is None else np.ascontiguousarray(fixed).view(np.uint8)
     film_kernel()(
-        n, px, pv, pm, dt, k, pc, pQ, pr, pvc, pom,
+        n, xs.ctypes.data, vs.ctypes.data, mass.ctypes.data, dt,
+        k, c.ctypes.data, Q.ctypes.data, r.ctypes.data, vc.ctypes.data, om.ctypes.data,
         int(mu is not None), 0.0 if mu is None else float(mu), offset, max_passes,
-        _PROJ_TOL, _PROJ_MAX_ITER, _GAP_TOL, None if fx is None else fx[1], *out.ptrs,
+        _PROJ_TOL, _PROJ_MAX_ITER, _GAP_TOL, None if mask is None else mask.ctypes.data,
+        *out.ptrs,
     )  # fmt: skip
     return out.result
 
