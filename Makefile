@@ -5,7 +5,7 @@ PY := .venv/bin/python
 export OPENBLAS_NUM_THREADS := 1
 export OMP_NUM_THREADS := 1
 # One OpenBLAS kernel set on every x86-64 machine (the CPU-chosen kernels change round-off,
-# and two contact tests are sensitive to it: docs/parallel.md, found session 9)
+# and two contact tests are sensitive to it: docs/parallel.md)
 export OPENBLAS_CORETYPE := Sandybridge
 MPIRUN := mpirun --allow-run-as-root --oversubscribe -n 2
 OUT ?= results
@@ -69,7 +69,7 @@ bench-arm: env
 	$(PY) benchmarks/arm_perf.py --integrator explicit --meshes 16x20 24x30 32x40 --angle 10 \
 		--kernels numpy compiled --repeat 3 --out $(OUT)/arm-perf-explicit
 
-## make verification: the README's shell verification table (results/verification.md)
+## make verification: the shell verification table of docs/results/verification.md (results/verification.md)
 verification: env
 	$(PY) benchmarks/verification_table.py --out $(OUT)
 
