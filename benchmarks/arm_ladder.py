@@ -12,10 +12,11 @@ and 16x20; quasi-static on 8x10); one more rung repeats the reference on 2 MPI r
 round-off floor, below).
 
 **Reference** = the rung marked ``"reference": True``: the finest setting, the explicit run
-on a 32x40 quadratic mesh (``--quick``: implicit 16x20, dt = 0.005 s, around the 8x10
-default; session 7 found that reference 11-14 % from the explicit 24x30 curve, i.e. not
-mesh-converged, which is why the full ladder's reference is the explicit 32x40 run: the
-implicit path does not reach 57 degrees on 24x30 in useful time).
+on a 32x40 quadratic mesh (``--quick``: implicit 16x20, dt = 0.005 s, around the implicit
+8x10 run; measured 2026-11-23 with commit 1bcdfe2, that reference is 11-14 % from the
+explicit 24x30 curve, i.e. not mesh-converged, which is why the full ladder's reference is
+the explicit 32x40 run: the implicit path does not reach 57 degrees on 24x30 in useful
+time).
 
 **Round-off floor.** The scene is sensitive to round-off: the same default scene run
 serially and under ``mpirun -n 2`` differed by 3.3 % (raw relative L2 over 2-40 deg) and
@@ -145,7 +146,6 @@ LADDER: list[dict[str, Any]] = [
     # degree-1 u and theta on the mesh with the base's node count
     {"name": "degree1_32x40", "element.degree": 1, "mesh.n_around": 32, "mesh.n_along": 40},
     # implicit: Newmark (gamma 0.6) + Lagrange-multiplier contact, dt 0.01 s; quasi-static
-    # the default scene until session 10:
     {"name": "newmark8x10", **NEWMARK, "mesh.n_around": 8, "mesh.n_along": 10},
     {"name": "newmark12x16", **NEWMARK, "mesh.n_around": 12, "mesh.n_along": 16},
     {"name": "newmark16x20", **NEWMARK},
@@ -160,8 +160,8 @@ QUICK_REF: dict[str, Any] = {
     "mesh.n_along": 20,
     "solver.dt": 0.005,
 }
-# the quick ladder varies the implicit 8x10 run (its dt rungs mean nothing explicitly: from
-# session 8, when BASE became explicit, until session 10 it inherited BASE's integrator)
+# the quick ladder varies the implicit 8x10 run (its dt rungs mean nothing explicitly, so it
+# sets its own integrator instead of BASE's)
 QUICK_BASE: dict[str, Any] = {
     **BASE,
     "mesh.n_around": 8,
@@ -169,7 +169,7 @@ QUICK_BASE: dict[str, Any] = {
     "solver.integrator": "newmark",
 }
 QUICK_LADDER: list[dict[str, Any]] = [
-    {"name": "base8x10"},  # 8x10, newmark dt 0.01 (the default scene until session 10)
+    {"name": "base8x10"},  # 8x10, newmark dt 0.01
     {"name": "dt0.02", "solver.dt": 0.02},
     {"name": "dt0.005", "solver.dt": 0.005},
     {"name": "mesh12x16", "mesh.n_around": 12, "mesh.n_along": 16},

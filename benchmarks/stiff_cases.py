@@ -121,8 +121,8 @@ _REFERENCE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # model -> 
 
 def reset(model: ShellModel) -> None:
     """Back to the reference state: u = theta = 0 and the nodal fibre bases of the reference
-    (a run re-bases them; zeroing u and theta alone left the next run of the same model
-    starting from the previous run's directors: fixed in session 8)."""
+    (a run re-bases them; zeroing u and theta alone would leave the next run of the same
+    model starting from the previous run's directors)."""
     ref = _REFERENCE.setdefault(model, model.state_arrays())
     model.restore_arrays({k: v.copy() for k, v in ref.items()})
 

@@ -77,7 +77,7 @@ def test_an_error_on_one_rank_aborts_instead_of_hanging(tmp_path, kind):
     """The scene runners' closing barrier: an error raised on one rank alone aborts the job
     with a message naming the rank, before the failing rank reaches collective calls the
     others are not in (mismatched collectives are undefined behaviour; they hung a 2-rank
-    explicit run in session 7); an error every rank raises (a solver stop) passes the
+    explicit run); an error every rank raises (a solver stop) passes the
     barrier and propagates normally on every rank."""
     script = tmp_path / "fail.py"
     script.write_text(_ONE_RANK_FAILS.format(kind=kind, closing="_end_together(comm)"))

@@ -395,8 +395,8 @@ def test_explicit_measure_skips_only_the_strain_energy():
     energy and work are those of the run that measures every step, the measured records'
     strain energy and energy balance too; the others have nan there."""
     # (load only: with the prescribed row, an explicit run of this chain, which lives on
-    # rank 0, deadlocks PETSc's garbage cleanup at interpreter exit on 2 ranks; found in
-    # session 10, also at the session-9 code, not understood yet)
+    # rank 0, deadlocks PETSc's garbage cleanup at interpreter exit on 2 ranks, also with
+    # the code of commit 7138b2c; not understood)
     kw = dict(t_end=3.0, dt=0.05, load=lambda t: math.sin(1.3 * t))
     full, _ = dy.integrate_explicit(_chain(prescribed=False), **kw)
     part, _ = dy.integrate_explicit(_chain(prescribed=False), measure=lambda k, t: k % 7 == 0, **kw)

@@ -76,8 +76,8 @@ def test_arm_sleeve_ci_scene(tmp_path):
 
 # the explicit run of the CI scene (2026-11-23, serial): the mean Eq. 28 flexion torque of the
 # rows at t = 0.15-0.20 s (dynamic settling) and of the last row (4 deg). Measured on 2 ranks:
-# the same rows, torques within 1e-13 relative. (Session 8: dt_crit by Lanczos instead of
-# the power iteration moved dt by 3e-6 relative, these torques by 1e-4 / 6e-4.)
+# the same rows, torques within 1e-13 relative. (dt_crit by Lanczos, commit 6a0e9cb, instead
+# of the power iteration moved dt by 3e-6 relative, these torques by 1e-4 / 6e-4.)
 EXPLICIT = {"settled": -0.035519123050900, "final": -0.070317577459400}
 
 
