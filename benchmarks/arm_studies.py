@@ -35,9 +35,9 @@ names it under ``same_as``; ``--force`` runs it).
 Integrator: ``--integrator`` (default ``explicit``: central difference + FILM contact at
 0.9 dt_crit; ``newmark`` = implicit Newmark, dt 0.01 s) for every case. The explicit step is
 bounded by the membrane wave speed sqrt(E / rho), 17x (set II) and 61x (set III) faster
-than in cotton, so material sets II and III take 17x / 61x the cotton run's steps (until
-session 9 they always ran ``newmark`` for that reason; with the compiled contact kernel of
-session 10 an explicit 16x20 step costs ~4 ms, so they are minutes to half an hour).
+than in cotton, so material sets II and III take 17x / 61x the cotton run's steps; with the
+compiled contact kernel an explicit 16x20 step costs ~4 ms, so they are minutes to half an
+hour).
 ``--stiff-integrator newmark`` runs sets II and III implicitly whatever ``--integrator``
 says. The ladder (``arm_ladder.py``) puts explicit 16x20 within a few % of implicit 16x20.
 

@@ -12,8 +12,8 @@ d_A = d_A(theta_A) from Euler's formula, turns them into the (u, theta) system:
 
 Element: quadratic Lagrange (9-node quadrilaterals by default) for u and theta, with full
 quadrature for bending and reduced quadrature for membrane and transverse shear (selective
-reduced integration, Hughes 1987), which removes membrane and shear locking; see the README
-for the measurements behind this choice.
+reduced integration, Hughes 1987), which removes membrane and shear locking; see
+docs/results/verification.md for the measurements behind this choice.
 
 Model / state / control: forms are compiled once in the constructor; the load factor ``lam``
 is a ``fem.Constant`` and prescribed values are arrays updated in place.
