@@ -1,5 +1,5 @@
-"""Shell verification table for the README: error and wall time per benchmark and mesh,
-and the locking measurements behind the element choice.
+"""Shell verification table (docs/results/verification.md): error and wall time per benchmark
+and mesh, and the locking measurements behind the element choice.
 
 Run:  make verification   (writes results/verification.md and prints it)
 Wall times include the one-off JIT compilation of each distinct form when it is not cached.

@@ -1,4 +1,5 @@
-"""Verification problems with exact or published answers (used by tests and the README table).
+"""Verification problems with exact or published answers (used by tests and the table of
+docs/results/verification.md).
 
 Each ``run_*`` function builds a model, solves it and returns a :class:`Result` with the
 computed quantity, the reference, the relative error and the wall time. References:
