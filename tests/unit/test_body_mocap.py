@@ -195,7 +195,7 @@ def test_real_arm_file(arm):
     # Elbow epicondyles are a few cm apart (mm -> m conversion applied).
     d = np.linalg.norm(arm.trajectory("EPICl") - arm.trajectory("EPICm"), axis=1)
     assert 0.04 < d.mean() < 0.10
-    # STYLu has a 14-frame gap at 137-150 (README: gaps 137-168): whole file refused.
+    # STYLu has a 14-frame gap at 137-150 (data/mocap/README.md: gaps 137-168): whole file refused.
     with pytest.raises(
         ValueError, match=r"marker 'STYLu' has a gap of 14 frames \(frames 137-150\)"
     ):

@@ -68,9 +68,9 @@ def test_eq27_degenerate_inputs():
 
 
 def test_elbow_flexion_real_arm_frames_0_80(arm_frames):
-    """README: elbow flexion 27 -> 114 deg in frames 0-80.
+    """data/mocap/README.md: elbow flexion 27 -> 114 deg in frames 0-80.
 
-    Tolerance 1 deg: the README quotes whole degrees (rounding <= 0.5 deg) and the angle is
+    Tolerance 1 deg: that README quotes whole degrees (rounding <= 0.5 deg) and the angle is
     defined the same way (between the Eq. 27 e1 axes: ACRO_tip -> elbow, elbow -> wrist).
     """
     a = np.degrees(
@@ -86,7 +86,7 @@ def test_elbow_flexion_real_arm_frames_0_80(arm_frames):
 
 
 def test_elbow_extension_real_arm_frames_455_555(arm):
-    """README: extension 127 -> 25 deg in frames 455-555 (same 1 deg tolerance)."""
+    """data/mocap/README.md: extension 127 -> 25 deg in frames 455-555 (same 1 deg tolerance)."""
     f = segment_frames(arm.window(first=455, last=555), marker_map=arm_marker_map())
     a = np.degrees(joint_angle(proximal=f["upper_arm"].rotations, distal=f["forearm"].rotations))
     assert a[0] == pytest.approx(127.0, abs=1.0)
