@@ -563,7 +563,7 @@ def read_trc(path: str | os.PathLike[str], *, up_axis: Literal["y", "z"] = "y") 
     if len(vals) != len(keys):
         raise ValueError(
             f"{src}: line 3: TRC header must have one value per key of line 2 "
-            f"({len(keys)}: {' '.join(keys)}), got {len(vals)} values"
+            f"({len(keys)} keys), got {len(vals)} values"
         )
     header = dict(zip(keys, vals, strict=True))
     if "Units" not in header:

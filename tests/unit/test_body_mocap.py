@@ -305,7 +305,11 @@ def test_trc_read_errors_name_file_and_line(tmp_path):
     bad[2] = bad[2].replace("\tmm", "")  # a header value missing
     k = tmp_path / "header.trc"
     k.write_text("\n".join(bad) + "\n")
-    with pytest.raises(ValueError, match=r"^header\.trc: line 3: TRC header must have one value"):
+    with pytest.raises(
+        ValueError,
+        match=r"^header\.trc: line 3: TRC header must have one value per key of line 2 "
+        r"\(8 keys\), got 7 values$",
+    ):
         read_trc(k)
 
 
