@@ -6,7 +6,11 @@ whose summary.json already says completed (same overrides) is skipped unless ``-
 so an interrupted study resumes. One CSV per study, ``OUT/<study>.csv``, gets a row as each
 case finishes (case, parameters, completed, final angle, |tau| at 10/20/30/40/50/57 deg, peak
 torque, wall time, steps, cut-backs, max penetration); columns that need every case of the
-study (errors against the finest mesh, ratios) are filled in when the study ends.
+study (errors against the finest mesh, ratios) and the resistance measures of each case
+(``clothfem.report.resistance_measures``: the elbow's work against the sleeve [J], its part
+in the flexion, the friction and material dissipation [J], the flexion's peak and mean |tau|
+[N m] and its 2-20 deg roughness) are filled in when the study ends; the measures of every
+case run are also printed as one table across the studies, ``OUT/measures.md``.
 
 Studies (``--study``, default all):
 
@@ -177,6 +181,45 @@ EXTRA = {
 }
 
 
+# the clothing-resistance measures of every case (clothfem.report.resistance_measures of its
+# history: the elbow's work against the sleeve, the dissipation, the flexion torque's peak,
+# mean and roughness), read from the case folder; one table across all studies run
+MEASURES = [
+    "joint_work_J",
+    "work_flexion_J",
+    "dissipation_friction_J",
+    "dissipation_material_J",
+    "peak_torque_flexion",
+    "mean_torque_flexion",
+    "roughness_2_20deg",
+]
+
+
+def measures_row(folder: Path) -> dict[str, float]:
+    """The MEASURES columns of one case folder (nan where the history lacks them)."""
+    from clothfem.report import resistance_measures
+
+    try:
+        m = resistance_measures(read_history(folder / "history.csv"))
+    except Exception:
+        return dict.fromkeys(MEASURES, math.nan)
+    (j,) = m["joints"].values()
+    d, f = m["dissipation"], m["torque"]["flexion"]
+    vals = (j["work"], j["work_flexion"], d["friction"], d["material"], f["peak"], f["mean"])
+    vals += (f.get("roughness"),)
+    return {k: math.nan if v is None else float(v) for k, v in zip(MEASURES, vals, strict=True)}
+
+
+def measures_table(rows: list[tuple[str, dict]]) -> str:
+    """Markdown table of the MEASURES of (study/case, row) pairs."""
+    head = "| case | " + " | ".join(MEASURES) + " |"
+    lines = [head, "|---|" + "---|" * len(MEASURES)]
+    for name, r in rows:
+        cells = " | ".join(f"{r.get(k, math.nan):.4g}" for k in MEASURES)
+        lines.append(f"| {name} | {cells} |")
+    return "\n".join(lines) + "\n"
+
+
 def _integrator(sets: list[str]) -> str:
     """The solver.integrator the last of ``sets`` gives (``""`` if none does)."""
     found = [v for k, _, v in (x.partition("=") for x in sets) if k == "solver.integrator"]
@@ -209,6 +252,8 @@ def compare(ref: Path, run: Path) -> tuple[float, float, float, float]:
 def post_process(study: str, rows: list[dict], study_dir: Path) -> None:
     """Fill the columns that need every case of the study (in place)."""
     by_name = {r["case"]: r for r in rows}
+    for r in rows:
+        r.update(measures_row(study_dir / r["case"]))
     if study == "mesh":
         for mu in (0.1, 0.5):
             mine = [r for r in rows if r["mu"] == mu]
@@ -293,6 +338,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     mesh = args.mesh or ((8, 10) if args.quick else (16, 20))
     common = [f"solver.integrator={args.integrator}", *angle_max_sets(args.angle_max, args.scene)]
+    table: list[tuple[str, dict]] = []
     for study in args.study:
         cases = study_cases(study, args)
         settings = list(common) if study == "mesh" else [*mesh_sets(mesh), *common]
@@ -305,7 +351,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"# study {study}: {len(cases)} case(s) in {study_dir}/")
             run_cases(cases, study_dir, args, settings=settings)
             continue
-        columns = ["case", *PARAMS[study], *result_columns(), *EXTRA.get(study, [])]
+        columns = ["case", *PARAMS[study], *result_columns(), *EXTRA.get(study, []), *MEASURES]
         writer = RowWriter(out / f"{study}.csv", columns)
         rows = run_cases(
             cases, study_dir, args, settings=settings, on_result=lambda _c, r, w=writer: w.write(r)
@@ -315,6 +361,11 @@ def main(argv: list[str] | None = None) -> int:
         writer.close()
         plots(study, cases, study_dir, out, f"mesh {mesh[0]}x{mesh[1]}, {args.integrator}")
         print(f"study {study}: {out / f'{study}.csv'}, figure(s) in {out}/")
+        table += [(f"{study}/{r['case']}", r) for r in rows]
+    if table:
+        text = measures_table(table)
+        (out / "measures.md").write_text(text)
+        print(f"resistance measures ({out / 'measures.md'}):\n{text}")
     return 0
 
 

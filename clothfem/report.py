@@ -205,6 +205,159 @@ def curve_error(
         return float(np.sqrt(np.float64(trap((curves[1] - curves[0]) ** 2)) / trap(curves[0] ** 2)))
 
 
+def roughness(angle: np.ndarray, torque: np.ndarray, *, lo: float = 2.0, hi: float = 20.0) -> float:
+    """Row-to-row roughness of a torque-angle history over [lo, hi] deg (dimensionless).
+
+    With tau_1..tau_m the torques of the rows whose angle lies in [lo, hi] (file order,
+    non-finite pairs dropped),
+
+        roughness = sqrt(mean_k (tau_k+1 - tau_k)^2) / mean_k tau_k,
+
+    the rms of the differences of consecutive rows over their mean. A smooth curve still has
+    a floor: a trend of slope s [N m/deg] sampled every da degrees contributes s da / mean.
+    nan with fewer than two rows in the range or a zero mean.
+    """
+    a, t = np.asarray(angle, float), np.asarray(torque, float)
+    ok = np.isfinite(a) & np.isfinite(t) & (a >= lo - _ATOL) & (a <= hi + _ATOL)
+    t = t[ok]
+    if t.size < 2 or t.mean() == 0.0:
+        return math.nan
+    return float(np.sqrt(np.mean(np.diff(t) ** 2)) / t.mean())
+
+
+def roughness_trend(
+    angle: np.ndarray, torque: np.ndarray, *, lo: float = 2.0, hi: float = 20.0
+) -> float:
+    """The part of :func:`roughness` a straight trend explains: the roughness of the least-
+    squares line through the same rows (|slope| x the rms angle step / the mean). A curve
+    without any oscillation still has this much; nan as for :func:`roughness`."""
+    a, t = np.asarray(angle, float), np.asarray(torque, float)
+    ok = np.isfinite(a) & np.isfinite(t) & (a >= lo - _ATOL) & (a <= hi + _ATOL)
+    if np.count_nonzero(ok) < 2 or np.ptp(a[ok]) == 0.0:
+        return math.nan
+    line = np.polyval(np.polyfit(a[ok], t[ok], 1), a[ok])
+    return roughness(a[ok], line, lo=lo, hi=hi) * float(line.mean()) / float(t[ok].mean())
+
+
+def joint_power(torque: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """Power [W] a joint spends against the garment: ``-tau . omega``, with ``tau`` [N m] the
+    torque the garment exerts on the segment about its joint and ``omega`` [rad/s] the
+    segment's angular velocity (vectors in the last axis, or scalars about the hinge axis)."""
+    tau, om = np.asarray(torque, float), np.asarray(omega, float)
+    if tau.ndim and tau.shape[-1] == 3 and om.ndim and om.shape[-1] == 3:
+        return -np.einsum("...i,...i->...", tau, om)
+    return -tau * om
+
+
+def joint_work(
+    t: np.ndarray, torque: np.ndarray, omega: np.ndarray, *, rule: str = "trapezoid"
+) -> np.ndarray:
+    """Cumulative work [J] a joint does against the garment at the samples ``t`` [s]:
+
+        W(t_k) = -int_{t_0}^{t_k} tau . omega dt,     W(t_0) = 0,
+
+    ``tau`` [N m] the torque the garment exerts on the segment about the joint, ``omega``
+    [rad/s] the segment's angular velocity ((n, 3) arrays, or (n,) components about the hinge
+    axis). Positive when the joint drives the garment (the arm works against the sleeve);
+    negative when the garment drives the joint. Rules: ``"trapezoid"`` (samples are states:
+    quasi-static increments, implicit steps), ``"impulse"`` (sample k is the mean over the
+    interval (t_k-1, t_k]: the explicit FILM forces, W_k = W_k-1 - tau_k . omega_k
+    (t_k - t_k-1)). Any monotone parameter can stand for t when omega is d(angle)/d(it):
+    ``joint_work(theta, tau_axis, 1.0)`` is the work over the hinge angle theta [rad].
+    """
+    s = np.asarray(t, float)
+    p = np.broadcast_to(joint_power(torque, omega), s.shape)
+    if rule == "trapezoid":
+        inc = 0.5 * (p[1:] + p[:-1]) * np.diff(s)
+    elif rule == "impulse":
+        inc = p[1:] * np.diff(s)
+    else:
+        raise ValueError(f"joint_work: rule must be 'trapezoid' or 'impulse', got {rule!r}")
+    return np.concatenate(([0.0], np.cumsum(inc))) if s.size else np.zeros(0)
+
+
+PHASES = (("settle", "settle"), ("flexion", "motion"))  # (name in the measures, CSV stage)
+MATERIAL_NOTE = "elastic (St. Venant-Kirchhoff): no material dissipation"
+
+
+def _phase_stats(t: np.ndarray, y: np.ndarray) -> tuple[float | None, float | None]:
+    """(peak, mean) of y over a phase's rows: the mean is the time average (trapezoid over
+    the row times) when the rows span some time, else the plain mean of the rows."""
+    ok = np.isfinite(y)
+    if not ok.any():
+        return None, None
+    t, y = t[ok], y[ok]
+    peak = float(np.max(y))
+    if t.size > 1 and np.all(np.isfinite(t)) and t[-1] > t[0]:
+        return peak, float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)) / (t[-1] - t[0]))
+    return peak, float(np.mean(y))
+
+
+def resistance_measures(h: dict[str, np.ndarray], *, joint: str = "joint") -> dict:
+    """The run's clothing-resistance measures from its history columns (JSON-ready dict).
+
+    - ``joints[joint]``: ``work`` [J] of the measured joint against the garment (the last
+      ``joint_work``; see :func:`joint_work`) and its part in the flexion phase
+      (``work_flexion``);
+    - ``dissipation`` [J]: ``friction`` (contact layers' ``dissipation_total``), ``material``
+      (``dissipation_material``, 0 for the elastic fabric, ``material_note`` says so) and
+      ``total`` = friction + material;
+    - ``torque``: per phase (``settle``: the body at rest while the loads come on;
+      ``flexion``: the motion rows), ``peak`` / ``mean`` of |tau| (``torque_mag``) and of
+      -tau . hinge axis (``flex``) over the history rows [N m] (rows of an explicit run are
+      means over their steps), the mean time-averaged; ``roughness`` of the flexion's
+      |tau| over 2-20 deg (:func:`roughness`) and the part a straight trend gives
+      (``roughness_trend``, :func:`roughness_trend`).
+    Missing columns give None.
+    """
+
+    def last(col: str) -> float | None:
+        c = h.get(col)
+        if c is None or c.dtype.kind != "f" or not np.isfinite(c).any():
+            return None
+        return float(c[np.isfinite(c)][-1])
+
+    stage = h["stage"]
+    t = h.get("time", np.arange(stage.size, dtype=float))
+    work = last("joint_work")
+    motion = np.flatnonzero(stage == "motion")
+    work_flex = None
+    if work is not None and "joint_work" in h:
+        before = np.flatnonzero(stage != "motion")
+        w = h["joint_work"]
+        start = float(w[before[before < motion[0]][-1]]) if motion.size and before.size else 0.0
+        work_flex = work - start if motion.size else 0.0
+    friction = last("dissipation_total")
+    material = last("dissipation_material")
+    if material is None and friction is not None:
+        material = 0.0  # histories without the column: elastic fabric
+    torque = {}
+    for name, st in PHASES:
+        rows = stage == st
+        entry: dict[str, float | None] = {"rows": int(rows.sum())}
+        for key, col, sign in (("", "torque_mag", 1.0), ("_flex", "torque_flex", -1.0)):
+            peak, mean = (None, None)
+            if col in h and rows.any():
+                peak, mean = _phase_stats(t[rows], sign * h[col][rows])
+            entry["peak" + key], entry["mean" + key] = peak, mean
+        torque[name] = entry
+    on = stage == "motion"
+    r = roughness(h["angle_deg"][on], h["torque_mag"][on]) if on.any() else math.nan
+    rt = roughness_trend(h["angle_deg"][on], h["torque_mag"][on]) if on.any() else math.nan
+    torque["flexion"]["roughness"] = r if math.isfinite(r) else None
+    torque["flexion"]["roughness_trend"] = rt if math.isfinite(rt) else None
+    return {
+        "joints": {joint: {"work": work, "work_flexion": work_flex}},
+        "dissipation": {
+            "friction": friction,
+            "material": material,
+            "material_note": MATERIAL_NOTE if material == 0.0 else None,
+            "total": None if friction is None else friction + (material or 0.0),
+        },
+        "torque": torque,
+    }
+
+
 def _stopped_note(h: dict[str, np.ndarray], summary: dict) -> str:
     """`` (stopped at X deg)`` if summary.json says the run did not complete, else ''."""
     if summary.get("completed", True) is not False:
@@ -270,6 +423,41 @@ def _fmt(x: float | None, spec: str = ".4g") -> str:
     return "—" if x is None or not math.isfinite(x) else format(x, spec)
 
 
+def _measures_lines(h: dict[str, np.ndarray], s: dict) -> list[str]:
+    """The report's resistance-measure lines (:func:`resistance_measures` of the history)."""
+    joint = s.get("measures", {}).get("joint") if isinstance(s.get("measures"), dict) else None
+    m = resistance_measures(h, joint=joint or "joint")
+    lines = []
+    for name, j in m["joints"].items():
+        if j["work"] is not None:
+            lines.append(
+                f"- work of the {name} joint against the garment: {j['work']:.4g} J "
+                f"(flexion {_fmt(j['work_flexion'])} J)"
+            )
+    d = m["dissipation"]
+    if d["total"] is not None:
+        note = f": {d['material_note']}" if d["material_note"] else ""
+        lines.append(
+            f"- energy dissipated by the clothing: {d['total']:.4g} J = friction "
+            f"{d['friction']:.4g} J + material {d['material']:.4g} J{note}"
+        )
+    for name, e in m["torque"].items():
+        if e["peak"] is None:
+            continue
+        text = f"- {name} torque |tau|: peak {e['peak']:.4g} N m, mean {e['mean']:.4g} N m"
+        if e["peak_flex"] is not None:
+            text += f"; -tau . axis: peak {e['peak_flex']:.4g} N m, mean {e['mean_flex']:.4g} N m"
+        lines.append(text)
+    r = m["torque"]["flexion"].get("roughness")
+    if r is not None:
+        rt = m["torque"]["flexion"].get("roughness_trend")
+        lines.append(
+            f"- torque roughness over 2-20 deg (rms row-to-row / mean): {100 * r:.1f} %"
+            + (f" (a straight trend alone: {100 * rt:.1f} %)" if rt is not None else "")
+        )
+    return lines
+
+
 def report_markdown(run_dir: str | Path) -> str:
     """A short Markdown report of a run folder (status, torques at fixed angles, cost)."""
     run_dir = Path(run_dir)
@@ -329,6 +517,7 @@ def report_markdown(run_dir: str | Path) -> str:
             shares += f", other {100 * (whole - total) / whole:.1f} %"
             of = "of the wall time"
         lines.append(f"- time shares {of}: {shares}")
+    lines += _measures_lines(h, s)
     flex = torque_curve(h, "torque_flex") if "torque_flex" in h else None
     head = "| angle [deg] | torque_mag [N m] |" + (" -torque_flex [N m] |" if flex else "")
     lines += ["", head, "|---|---|" + ("---|" if flex else "")]

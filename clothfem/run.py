@@ -139,6 +139,8 @@ def build_model(
         degree=scene["element"]["degree"],
         quadrature=Quadrature(
             reduced=scene["element"]["reduced_quadrature"],
+            scheme=scene["element"]["scheme"],
+            psri_factor=scene["element"]["psri_factor"],
             stabilization=scene["element"]["stabilization"],
         ),
     )
@@ -193,6 +195,21 @@ def _write_summary(out: Path, summary: dict[str, Any], comm: MPI.Comm) -> None:
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
         (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
+
+
+def _measures(scene: dict[str, Any], out: Path) -> dict[str, Any] | None:
+    """The resistance measures of a body scene's history (:func:`report.resistance_measures`),
+    keyed by the measured joint (the torque segment); None without a readable history."""
+    from .report import ReportError, read_history, resistance_measures
+    from .scenes_arm import _torque_segment
+
+    k = _torque_segment(scene)
+    joint = scene["body"][k]["name"] if k is not None else "joint"
+    try:
+        h = read_history(out / "history.csv")
+    except ReportError:
+        return None
+    return {"joint": joint, **resistance_measures(h, joint=joint)}
 
 
 def run_scene(
@@ -267,6 +284,8 @@ def run_scene(
         finally:
             signal.signal(signal.SIGTERM, old)
             summary["wall_time"] = time.perf_counter() - t0
+            if comm.rank == 0:
+                summary["measures"] = _measures(scene, out)
             _write_summary(out, summary, comm)
         rank0_print(f"done in {time.perf_counter() - t0:.1f} s; results in {out}/")
         return out

@@ -42,6 +42,7 @@ from .body import FixedMotion, HingeMotion
 from .contact.forces import joint_torque
 from .contact.lagrange import ContactDivergence, LagrangeContact, LagrangeContactParameters
 from .io import ResultWriter, rank0_print, snapshot_png
+from .report import joint_power, joint_work
 from .scene import SceneError
 from .shell import ShellModel
 from .static import SolverDivergence
@@ -75,6 +76,7 @@ def body_motions(scene: dict[str, Any]) -> list[FixedMotion | HingeMotion]:
                     angle_max=math.radians(seg["angle_max"]),
                     centre0=seg["centre"],
                     rotation0=q0,
+                    t_ramp=seg["omega_ramp"],
                 )
             )
     return out
@@ -241,6 +243,23 @@ class _ViscousStabilization:
         return comm.allreduce(float(f), op=MPI.SUM)
 
 
+def _measured_hinge(motions, k_torque: int | None) -> HingeMotion | None:
+    """The hinge motion of the measured joint (the torque segment), if it is a hinge."""
+    if k_torque is None or not isinstance(motions[k_torque], HingeMotion):
+        return None
+    return motions[k_torque]
+
+
+def _segment_torque(contact, model: ShellModel, k: int, joint: np.ndarray, comm) -> np.ndarray:
+    """Torque [N m] about ``joint`` of the contact forces on ellipsoid ``k`` at the last
+    converged state of a :class:`LagrangeContact` (reduced over ranks)."""
+    nodes, body, f_pairs, _ = contact.pair_forces()
+    on = body == k
+    x = contact.X + model.u.x.array[: 3 * contact.n].reshape(-1, 3)
+    tau = joint_torque(x[nodes[on]], -f_pairs[on], joint) if on.any() else np.zeros(3)
+    return comm.allreduce(np.asarray(tau, dtype=float), op=MPI.SUM)
+
+
 def _torque_columns(tau: np.ndarray, res: np.ndarray, hinge_axis: np.ndarray) -> dict:
     """CSV columns of the Eq. 28 torque [N m] and the resultant on the body [N]."""
     return {
@@ -355,11 +374,23 @@ def run_contact_scene(
     def torque() -> np.ndarray:
         if c["aj"] != "touching":
             return contact.torque(J, nodes=aj)
-        nodes, body, f_pairs, _ = contact.pair_forces()
-        on = body == k_torque
-        x = contact.X + model.u.x.array[: 3 * contact.n].reshape(-1, 3)
-        tau = joint_torque(x[nodes[on]], -f_pairs[on], J) if on.any() else np.zeros(3)
-        return comm.allreduce(tau, op=MPI.SUM)
+        return _segment_torque(contact, model, k_torque, J, comm)
+
+    hinge_motion = _measured_hinge(motions, k_torque)
+    # the measured joint's work against the garment, quasi-static: the trapezoid rule of
+    # report.joint_work over the hinge angle, tau_seg . axis of the forces on the segment
+    work = {"W": 0.0, "theta": 0.0, "tau": 0.0}
+
+    def joint_work_at(stage: str, t: float) -> float:
+        if hinge_motion is None:
+            return 0.0
+        seg = _segment_torque(contact, model, k_torque, hinge_motion.joint, comm)
+        tau = float(seg @ hinge_axis)
+        theta = hinge_motion.angle(t) if stage == "motion" else 0.0
+        th, ta = np.array([work["theta"], theta]), np.array([work["tau"], tau])
+        work["W"] += float(joint_work(th, ta, 1.0)[-1])
+        work.update(theta=theta, tau=tau)
+        return work["W"]
 
     def snapshot(tag: str) -> None:
         _snapshot(scene, model, out, comm, tag, contact.bodies)
@@ -400,7 +431,9 @@ def run_contact_scene(
                 "substeps": len(recs),
                 "active_set_iterations": sum(r.active_set_iterations for r in recs),
                 "newton_iterations": sum(r.newton_iterations for r in recs),
+                "joint_work": joint_work_at(stage, t),
                 "dissipation_total": contact.dissipation_total,
+                "dissipation_material": 0.0,
                 "stabilization_force": stab.last if stab is not None else 0.0,
                 "wall_time": now - stage_wall["t"],
                 "elapsed": now - t0,
@@ -658,11 +691,14 @@ def _run_dynamic(
         _snapshot(scene, model, out, comm, tag, contact.bodies)
 
     state = {"step": 0, "rows": 0, "cut": 0, "pen": 0.0, "newton": 0, "snap": 0}
+    state.update(work=0.0, power=0.0)  # the measured joint's work [J] and last power [W]
+    hinge_motion = _measured_hinge(motions, plan.k_torque)
     keep = None
     if resume:
         data = _load_checkpoint(out, comm)
         dc.restore_arrays(data)
         state.update({k: int(data[f"run_{k}"]) for k in ("step", "rows", "cut", "newton", "snap")})
+        state.update({k: float(data[f"run_{k}"]) for k in ("work", "power") if f"run_{k}" in data})
         state["pen"] = float(data["run_pen"])
         keep = state["rows"]
         rank0_print(f"  resumed from the checkpoint at t = {dc.t:.6g} s (step {state['step']})")
@@ -679,6 +715,13 @@ def _run_dynamic(
             cr = r.contact
             state["pen"] = max(state["pen"], cr.max_penetration)
             state["newton"] += cr.newton_iterations
+            if hinge_motion is not None:  # trapezoid rule of report.joint_work over the step
+                moving = r.time > t_settle
+                omega = hinge_motion.pose(r.time - t_settle).angular_velocity * moving
+                seg = _segment_torque(contact, model, plan.k_torque, hinge_motion.joint, comm)
+                power = float(joint_power(seg, omega))
+                state["work"] += 0.5 * (state["power"] + power) * r.dt
+                state["power"] = power
             tio = time.perf_counter()
             step = state["step"]
             if step % o["every"] == 0:
@@ -717,7 +760,9 @@ def _run_dynamic(
                 "newton_iterations": cr.newton_iterations,
                 "kinetic_energy": r.kinetic_energy,
                 "strain_energy": r.strain_energy,
+                "joint_work": state["work"],
                 "dissipation_total": contact.dissipation_total,
+                "dissipation_material": 0.0,
                 "t_assembly": tm["assembly"],
                 "t_contact": tm["contact"],
                 "t_solve": tm["solve"],
@@ -824,6 +869,7 @@ def _run_explicit(
             start["clock"] = (float(c0[0]), int(c0[1]), float(c0[2]), int(c0[3]))
         state.update(row=int(data["run_row"]), snap=int(data["run_snap"]))
         state["pen"] = float(data["run_pen"])
+        state["work"] = float(data["run_work"]) if "run_work" in data else 0.0
         keep = state["row"]
     else:
         st = stable_time_step(system, lam=load(0.0), iterations=600)
@@ -856,20 +902,31 @@ def _run_explicit(
         """The step to ``t`` ends a history row (one row per interval, and the last step)."""
         return t >= (state["row"] + 1) * interval - 1e-12 or t >= t_end - 1e-12
 
-    acc = {"tau": np.zeros(3), "res": np.zeros(3), "n": 0}
+    acc = {"tau": np.zeros(3), "res": np.zeros(3), "n": 0, "work": 0.0}
+    state.setdefault("work", 0.0)  # joint work up to the last row [J] (all ranks)
+    hinge_motion = _measured_hinge(motions, k_torque)
     xdmf_name = "fabric" if keep is None else f"fabric_resumed_{start['step']:06d}"
 
-    def local_torque_and_resultant() -> tuple[np.ndarray, np.ndarray]:
-        """Eq. 28 torque about J and the contact resultant of this step over the owned nodes
-        (not reduced: the runner sums them over a row's steps and reduces once per row)."""
+    def local_torque_and_resultant(t: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """Eq. 28 torque about J and the contact resultant of this step over the owned nodes,
+        and the power [W] the measured joint spends against the garment in it (-tau_seg .
+        omega, tau_seg the torque of the forces on the moving segment about its joint; not
+        reduced: the runner sums them over a row's steps and reduces once per row)."""
         f = fc.forces_on_body()
-        on = fc.contact_body() == k_torque if c["aj"] == "touching" else in_aj
+        touching = fc.contact_body() == k_torque
+        on = touching if c["aj"] == "touching" else in_aj
         x = fc.X + model.u.x.array[: 3 * n].reshape(n, 3)
         if on is None:
             tau = joint_torque(x, f, J)
         else:
             tau = joint_torque(x[on], f[on], J) if on.any() else np.zeros(3)
-        return np.asarray(tau, dtype=float), f.sum(axis=0)
+        power = 0.0
+        if hinge_motion is not None and t > t_settle and touching.any():
+            omega = hinge_motion.pose(t - t_settle).angular_velocity
+            if omega.any():
+                seg = joint_torque(x[touching], f[touching], hinge_motion.joint)
+                power = float(joint_power(seg, omega))
+        return np.asarray(tau, dtype=float), f.sum(axis=0), power
 
     with ResultWriter(out, model, name=xdmf_name, keep_rows=keep) as writer:
 
@@ -881,6 +938,7 @@ def _run_explicit(
                 keys = ("t_base", "step_base", "h", "n_end")
                 run.update({f"run_clock_{k}": val for k, val in zip(keys, r.clock, strict=True)})
             run.update(run_pen=state["pen"], contact_dissipation=fc.dissipation_total, dt=dt)
+            run.update(run_work=state["work"])
             run.update({f"st_{k}": getattr(st, k) for k in StableStep.__dataclass_fields__})
             model_data = {f"model_{k}": val for k, val in model.state_arrays().items()}
             arrays = {"v": v.getArray(readonly=True).copy(), "a": a.getArray(readonly=True)}
@@ -889,18 +947,20 @@ def _run_explicit(
             )
 
         def on_step(r) -> None:
-            tau_local, res_local = local_torque_and_resultant()
+            tau_local, res_local, power = local_torque_and_resultant(r.time)
             acc["tau"] += tau_local
             acc["res"] += res_local
+            acc["work"] += power * r.dt  # the impulse rule of report.joint_work
             acc["n"] += 1
             if not ends_row(r.time):
                 return
             h = fc.collect()  # the contact diagnostics of the row's steps (collective)
             state["row"] += 1
             k = acc["n"]
-            sums = np.concatenate([acc["tau"], acc["res"]])
+            sums = np.concatenate([acc["tau"], acc["res"], [acc["work"]]])
             comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)  # one reduction per row
-            tau, res = sums[:3] / k, sums[3:] / k
+            tau, res = sums[:3] / k, sums[3:6] / k
+            state["work"] += float(sums[6])
             angle = angle_at(r.time)
             now = time.perf_counter()
             pen_after = max(0.0, -h.min_gap_after) if math.isfinite(h.min_gap_after) else 0.0
@@ -928,7 +988,10 @@ def _run_explicit(
                 "substeps": k,
                 "kinetic_energy": r.kinetic,
                 "strain_energy": r.strain,
+                "external_work": r.external_work,
+                "joint_work": state["work"],
                 "dissipation_total": fc.dissipation_total,
+                "dissipation_material": 0.0,
                 "t_contact": fc.wall - state["contact_wall"],
                 "t_io": t_io,
                 "wall_time": now - state["t_row"],
@@ -938,7 +1001,7 @@ def _run_explicit(
             writer.append_row(row)
             every = o["checkpoint_every"]
             state["checkpoint"] = bool(every) and state["row"] % every == 0
-            acc.update(tau=np.zeros(3), res=np.zeros(3), n=0)
+            acc.update(tau=np.zeros(3), res=np.zeros(3), n=0, work=0.0)
             summary.update(
                 final_angle_deg=angle,
                 time=r.time,

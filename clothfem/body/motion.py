@@ -205,6 +205,13 @@ class HingeMotion:
     the line through ``joint`` along unit vector ``axis`` (right-hand rule) by
     ``theta(t) = omega * clip(t - t_start, 0, angle_max / omega)``; afterwards it rests.
 
+    ``t_ramp`` > 0 starts the motion smoothly: the rate rises from 0 to ``omega`` over
+    ``t_ramp`` seconds as ``omega (3 x^2 - 2 x^3)``, x = (t - t_start) / t_ramp (continuous
+    angular acceleration, 0 at both ends of the ramp), so ``theta = omega t_ramp (x^3 - x^4 / 2)``
+    in the ramp and ``omega (t - t_start - t_ramp / 2)`` after it: the angle lags the constant
+    rate by ``omega t_ramp / 2`` and ``angle_max`` is reached ``t_ramp / 2`` later. The stop at
+    ``angle_max`` stays abrupt.
+
     Attributes
     ----------
     joint : (3,) array
@@ -221,6 +228,9 @@ class HingeMotion:
         Rotation at ``theta = 0`` (columns e1, e2, e3).
     t_start : float
         Start of the rotation in s.
+    t_ramp : float
+        Duration of the smooth start in s (0: the rate jumps to ``omega`` at ``t_start``);
+        ``omega * t_ramp / 2`` must not exceed ``angle_max``.
     """
 
     joint: NDArray[np.float64]
@@ -230,6 +240,7 @@ class HingeMotion:
     centre0: NDArray[np.float64]
     rotation0: NDArray[np.float64]
     t_start: float = 0.0
+    t_ramp: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joint", _vec3(self.joint, what="HingeMotion joint"))
@@ -249,22 +260,49 @@ class HingeMotion:
             self, "rotation0", check_rotation(self.rotation0, what="HingeMotion rotation0")
         )
         object.__setattr__(self, "t_start", float(self.t_start))
+        tr = float(self.t_ramp)
+        if not (np.isfinite(tr) and tr >= 0.0):
+            raise ValueError(f"HingeMotion t_ramp: must be finite and >= 0 s, got {tr}")
+        if 0.5 * self.omega * tr > self.angle_max:
+            raise ValueError(
+                f"HingeMotion t_ramp: the smooth start turns omega t_ramp / 2 = "
+                f"{0.5 * self.omega * tr:.4g} rad, more than angle_max = {self.angle_max:.4g} rad"
+            )
+        object.__setattr__(self, "t_ramp", tr)
 
     @property
     def t_end(self) -> float:
         """Time in s at which ``angle_max`` is reached."""
-        return self.t_start + self.angle_max / self.omega
+        return self.t_start + self.angle_max / self.omega + 0.5 * self.t_ramp
 
     def angle(self, t: float) -> float:
         """Hinge angle ``theta(t)`` in rad."""
-        return self.omega * min(max(float(t) - self.t_start, 0.0), self.angle_max / self.omega)
+        if self.t_ramp == 0.0:  # (the constant rate's expression, bit for bit)
+            return self.omega * min(max(float(t) - self.t_start, 0.0), self.angle_max / self.omega)
+        s = min(max(float(t) - self.t_start, 0.0), self.t_end - self.t_start)
+        if s < self.t_ramp:
+            x = s / self.t_ramp
+            return self.omega * self.t_ramp * x**3 * (1.0 - 0.5 * x)
+        return min(self.omega * (s - 0.5 * self.t_ramp), self.angle_max)
+
+    def rate(self, t: float) -> float:
+        """Angular speed ``d theta / dt`` at ``t`` in rad/s (0 before the start and from
+        ``t_end`` on)."""
+        if not self.t_start <= t < self.t_end:
+            return 0.0
+        s = float(t) - self.t_start
+        if s < self.t_ramp:
+            x = s / self.t_ramp
+            return self.omega * x * x * (3.0 - 2.0 * x)
+        return self.omega
 
     def pose(self, t: float) -> Pose:
-        """Pose at ``t`` (s); angular velocity ``omega * axis`` for ``t_start <= t < t_end``."""
+        """Pose at ``t`` (s); angular velocity ``rate(t) * axis`` (``omega * axis`` for
+        ``t_start + t_ramp <= t < t_end``)."""
         r = _axis_rotation(self.axis, self.angle(t))
         centre = self.joint + r @ (self.centre0 - self.joint)
-        moving = self.t_start <= t < self.t_end
-        w = self.omega * self.axis if moving else np.zeros(3)
+        rate = self.rate(t)
+        w = rate * self.axis if rate else np.zeros(3)
         return Pose(
             time=t,
             centre=centre,
