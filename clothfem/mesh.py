@@ -262,37 +262,61 @@ def cylinder_panel(
     """Cylindrical panel (roof) of axis +x: x in [0, length], polar angle in [-angle, angle]
     measured from +z (so the crest is at y = 0, z = radius).
 
+    ``angle`` is the half-opening [rad], 0 < angle < pi: angle = pi/2 is a semi-cylinder
+    (z >= 0), angles near pi an almost closed tube. The arc is built from pieces of at most
+    pi/2 (gmsh arcs must span less than pi), ``n_around`` equal cells in all.
     Boundaries: ``start`` (x = 0), ``end`` (x = length) and ``sides`` (the straight edges).
-    Used by the Scordelis-Lo roof benchmark.
+    Used by the Scordelis-Lo roof and the pinched semi-cylinder benchmarks.
     """
     radius, length = _positive("radius", radius), _positive("length", length)
     if not (0 < angle < math.pi):
-        raise ValueError(f"angle must be in (0, pi) radians, got {angle!r}")
+        raise ValueError(f"angle must be in (0, pi) radians (half-opening), got {angle!r}")
     n_around = _positive_int("n_around", n_around)
     n_along = _positive_int("n_along", n_along)
     _check_cell(cell, order)
+    counts = _arc_cell_counts(2 * angle, n_around)
 
     def build(gmsh):
         geo = gmsh.model.geo
         centre = geo.addPoint(0, 0, 0)
-        # From +y side to -y side so that extrusion along +x gives outward (+r) normals.
-        a = geo.addPoint(0.0, radius * math.sin(angle), radius * math.cos(angle))
-        b = geo.addPoint(0.0, -radius * math.sin(angle), radius * math.cos(angle))
-        arc = geo.addCircleArc(a, centre, b)
-        geo.mesh.setTransfiniteCurve(arc, n_around + 1)
+        # From the +y side to the -y side so that extrusion along +x gives outward normals;
+        # the breaks between the arcs fall on cell boundaries.
+        phis = angle - 2 * angle * np.concatenate([[0], np.cumsum(counts)]) / n_around
+        pts = [geo.addPoint(0.0, radius * math.sin(p), radius * math.cos(p)) for p in phis]
+        arcs = [geo.addCircleArc(pts[i], centre, pts[i + 1]) for i in range(len(counts))]
+        for arc, n in zip(arcs, counts, strict=True):
+            geo.mesh.setTransfiniteCurve(arc, n + 1)
         out = geo.extrude(
-            [(1, arc)], length, 0, 0, numElements=[n_along], recombine=cell == "quadrilateral"
+            [(1, a) for a in arcs],
+            length,
+            0,
+            0,
+            numElements=[n_along],
+            recombine=cell == "quadrilateral",
         )
         geo.synchronize()
-        far, surf, side_a, side_b = (tag for _, tag in out)
-        gmsh.model.addPhysicalGroup(2, [surf], 1)
+        # per arc: far edge, surface, the lateral edges at the arc's end and at its start
+        far = [out[4 * i][1] for i in range(len(arcs))]
+        surfaces = [out[4 * i + 1][1] for i in range(len(arcs))]
+        side_a, side_b = abs(out[3][1]), abs(out[4 * len(arcs) - 2][1])
+        gmsh.model.addPhysicalGroup(2, surfaces, 1)
         tags = {"start": 1, "end": 2, "sides": 3}
-        gmsh.model.addPhysicalGroup(1, [arc], tags["start"])
-        gmsh.model.addPhysicalGroup(1, [far], tags["end"])
+        gmsh.model.addPhysicalGroup(1, arcs, tags["start"])
+        gmsh.model.addPhysicalGroup(1, far, tags["end"])
         gmsh.model.addPhysicalGroup(1, [side_a, side_b], tags["sides"])
         return tags
 
     return _gmsh_to_dolfinx(comm, build, order=order, cell=cell)
+
+
+def _arc_cell_counts(span: float, n_cells: int) -> list[int]:
+    """Cells per gmsh arc: the fewest arcs of at most pi/2 each, cells spread evenly."""
+    n_arcs = max(1, math.ceil(span / (0.5 * math.pi) - 1e-12))
+    if n_cells < n_arcs:
+        raise ValueError(
+            f"n_around must be >= {n_arcs} for a panel of opening {span:.4g} rad, got {n_cells}"
+        )
+    return [len(c) for c in np.array_split(np.arange(n_cells), n_arcs)]
 
 
 def load_msh(path: str | Path, comm: MPI.Comm = MPI.COMM_WORLD) -> SurfaceMesh:

@@ -1,9 +1,12 @@
 """Quasi-static load stepping with automatic cut-back (PETSc SNES).
 
 The load factor goes from 0 to 1 in steps; a step whose Newton solve fails is retried from
-the last converged state with half the increment; after easy steps the increment grows back
-(bounded by ``max_increment``). Below ``min_increment`` the run stops with
-:class:`SolverDivergence`, keeping every converged step already reported.
+the last converged state with half the increment. After a converged step the increment
+follows the measured convergence: it is scaled by ``target_iterations / iterations`` (at
+most ``grow``, at least 1/2; no growth after a cut-back), bounded by ``max_increment``; a
+step stretches to the target load factor rather than leave less than a quarter increment.
+Below ``min_increment`` the run stops with :class:`SolverDivergence`, keeping every
+converged step already reported.
 
 PETSc options can be given on the command line with the solver's prefix (default
 ``static_``), e.g. ``-static_snes_monitor -static_snes_linesearch_type bt``.
@@ -33,14 +36,18 @@ class LoadStepping:
     """Load-stepping controls (load factor lam in [0, 1], dimensionless).
 
     initial_increment: first increment of lam; max_increment / min_increment bound it.
-    grow: factor applied after a step converging in at most ``easy_iterations`` iterations.
+    target_iterations: Newton iterations per step that keep the increment; after a step of
+    n iterations the next increment is the last one x target_iterations / n, clipped to
+    [1/2, grow] (and to at most 1 after a cut-back). Full Newton on shells to the default
+    tolerances takes 7-14 iterations per step.
+    grow: the largest growth factor of one step.
     """
 
     initial_increment: float = 0.1
     max_increment: float = 0.25
     min_increment: float = 1e-4
-    grow: float = 1.5
-    easy_iterations: int = 5
+    target_iterations: int = 12
+    grow: float = 2.0
 
     def __post_init__(self) -> None:
         if not (0 < self.min_increment <= self.initial_increment <= 1):
@@ -55,6 +62,19 @@ class LoadStepping:
             )
         if self.grow < 1:
             raise ValueError(f"LoadStepping grow must be >= 1, got {self.grow}")
+        if not (isinstance(self.target_iterations, int) and self.target_iterations >= 1):
+            raise ValueError(
+                f"LoadStepping target_iterations must be an integer >= 1, "
+                f"got {self.target_iterations!r}"
+            )
+
+    def next_increment(self, increment: float, iterations: int, cutbacks: int) -> float:
+        """The increment after a step of ``increment`` that converged in ``iterations``
+        Newton iterations after ``cutbacks`` cut-backs."""
+        factor = min(self.grow, max(0.5, self.target_iterations / max(iterations, 1)))
+        if cutbacks:
+            factor = min(factor, 1.0)
+        return min(max(increment * factor, self.min_increment), self.max_increment)
 
 
 @dataclass(frozen=True)
@@ -203,6 +223,8 @@ def solve_static(
     for target in targets:
         while lam < target - 1e-14:
             trial = min(lam + inc, target)
+            if target - trial < 0.25 * inc and target - lam <= stepping.max_increment:
+                trial = target  # no sliver of a step left before the target
             cutbacks = 0
             t0 = time.perf_counter()
             while True:
@@ -232,6 +254,5 @@ def solve_static(
             records.append(rec)
             if on_step is not None:
                 on_step(rec)
-            if its <= stepping.easy_iterations and cutbacks == 0:
-                inc = min(inc * stepping.grow, stepping.max_increment)
+            inc = stepping.next_increment(inc, its, cutbacks)
     return records

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass
 
 import numpy as np
 
@@ -25,6 +25,7 @@ __all__ = [
     "Pin",
     "Symmetry",
     "Prescribed",
+    "PointPin",
     "Load",
     "Support",
 ]
@@ -42,6 +43,11 @@ def _vector(owner: str, field: str, value) -> tuple[float, float, float]:
 def _where(owner: str, where) -> None:
     if not (isinstance(where, str) or callable(where)):
         raise ValueError(f"{owner} where must be a boundary name or a callable, got {where!r}")
+
+
+def _on(owner: str, on) -> None:
+    if on is not None and not isinstance(on, str):
+        raise ValueError(f"{owner} on must be a boundary name or None, got {on!r}")
 
 
 @dataclass(frozen=True)
@@ -102,14 +108,22 @@ class EdgeMoment:
 
 @dataclass(frozen=True)
 class PointForce:
-    """Dead force [N] at the mesh node nearest to ``point`` [m]."""
+    """Dead force [N] at the mesh node nearest to ``point`` [m].
+
+    ``on`` (keyword only): a boundary name; only the nodes of that boundary are candidates.
+    Where nodes coincide (the two lips of a slit) it selects the side; without it the choice
+    among coincident nodes is arbitrary.
+    """
 
     point: tuple[float, float, float]
     force: tuple[float, float, float]
+    _: KW_ONLY
+    on: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "point", _vector("PointForce", "point", self.point))
         object.__setattr__(self, "force", _vector("PointForce", "force", self.force))
+        _on("PointForce", self.on)
 
 
 @dataclass(frozen=True)
@@ -135,7 +149,11 @@ class Pin:
 @dataclass(frozen=True)
 class Symmetry:
     """Symmetry about the plane of normal ``axis`` (0 = x, 1 = y, 2 = z) through ``where``:
-    u_axis = 0 and the director stays in the plane (it rotates only about the normal)."""
+    u_axis = 0 and the director stays in the plane (it rotates only about the normal).
+
+    At a node on two symmetry planes (e.g. the centre node of a quarter model) the director
+    must stay in both, i.e. on their intersection line: both of its rotations are fixed.
+    """
 
     where: Where
     axis: int
@@ -177,5 +195,31 @@ class Prescribed:
             raise ValueError("Prescribed needs a displacement or a rotation, got neither")
 
 
+@dataclass(frozen=True, kw_only=True)
+class PointPin:
+    """u_i = 0 for i in ``components`` (0 = x, 1 = y, 2 = z) at the one mesh node nearest to
+    ``point`` [m]; the other components and the director stay free.
+
+    It removes rigid-body modes that the other supports leave, e.g. of a free model cut by
+    symmetry planes: under a self-equilibrated load its reactions are zero, so it changes
+    nothing but the singularity. ``on``: a boundary name whose nodes are the only candidates
+    (selects one side where nodes coincide, as at a slit).
+    """
+
+    point: tuple[float, float, float]
+    components: tuple[int, ...] = (0, 1, 2)
+    on: str | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "point", _vector("PointPin", "point", self.point))
+        comps = tuple(self.components)
+        if not comps or len(set(comps)) != len(comps) or any(c not in (0, 1, 2) for c in comps):
+            raise ValueError(
+                f"PointPin components must be distinct among 0, 1, 2, got {self.components!r}"
+            )
+        object.__setattr__(self, "components", comps)
+        _on("PointPin", self.on)
+
+
 Load = Gravity | Pressure | EdgeTraction | EdgeMoment | PointForce
-Support = Clamp | Pin | Symmetry | Prescribed
+Support = Clamp | Pin | Symmetry | Prescribed | PointPin

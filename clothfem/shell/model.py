@@ -41,6 +41,7 @@ from .conditions import (
     Gravity,
     Pin,
     PointForce,
+    PointPin,
     Prescribed,
     Pressure,
     Symmetry,
@@ -136,12 +137,10 @@ class ShellModel:
         self.surface, self.mesh, self.comm = surface, mesh, mesh.comm
         self.material, self.thickness, self.degree = material, float(thickness), degree
         self.loads, self.supports = tuple(loads), tuple(supports)
-        for s in self.supports:
-            if isinstance(s.where, str):
-                surface.facets(s.where)  # one-line error on an unknown tag
-        for load in self.loads:
-            if isinstance(load, EdgeTraction | EdgeMoment):
-                surface.facets(load.where)
+        for c in (*self.supports, *self.loads):  # one-line error on an unknown tag
+            for name in (getattr(c, "where", None), getattr(c, "on", None)):
+                if isinstance(name, str):
+                    surface.facets(name)
 
         family = "Q" if mesh.topology.cell_type == dolfinx.mesh.CellType.quadrilateral else "P"
         self.V = fem.VectorFunctionSpace(mesh, (family, degree), dim=3)  # u and d
@@ -207,16 +206,20 @@ class ShellModel:
             )
         normals /= norms[:, None]
         self.D.x.array[:] = normals.ravel()
-        preferred = np.full((self.n_local, 3), np.nan)
+        axes = np.zeros((self.n_local, 3), dtype=bool)  # node on the symmetry plane x, y, z
         for s in self.supports:
             if isinstance(s, Symmetry):
-                preferred[self._node_mask(s.where)] = np.eye(3)[s.axis]
-        self._preferred = preferred  # symmetry-plane normals to align e1 with (NaN: none)
+                axes[self._node_mask(s.where), s.axis] = True
+        self._symmetry_axes = axes
+        # e1 along the (first) symmetry-plane normal: theta2 = 0 keeps the director in it
+        first = np.eye(3)[np.argmax(axes, axis=1)]
+        self._preferred = np.where(axes.any(axis=1)[:, None], first, np.nan)  # NaN: none
         self.basis = self._fibre_basis(normals, np.arange(self.n_local))
 
     def _fibre_basis(self, directors: np.ndarray, nodes: np.ndarray) -> np.ndarray:
         """Hughes' fibre bases of ``nodes`` around ``directors``, e1 aligned with a symmetry
-        plane normal where a Symmetry support asks for it."""
+        plane normal where a Symmetry support asks for it (the x, y, z order decides at a
+        node on two planes, whose rotations are both fixed)."""
         pref = self._preferred[nodes]
         has = ~np.isnan(pref[:, 0])
         out = rotation.fibre_basis(directors)
@@ -233,6 +236,11 @@ class ShellModel:
         owned = np.zeros(self.n_local, dtype=bool)
         owned[: self.n_owned] = True
         for s in self.supports:
+            if isinstance(s, PointPin):
+                i, _ = self._nearest_node(s.point, on=s.on)
+                if i >= 0:
+                    self._add_bc(3 * i + np.array(s.components))
+                continue
             nodes = np.flatnonzero(self._node_mask(s.where) & owned)
             if isinstance(s, Clamp | Pin | Symmetry):
                 comps = (s.axis,) if isinstance(s, Symmetry) else (0, 1, 2)
@@ -240,8 +248,6 @@ class ShellModel:
                 self._add_bc(rows)
                 if isinstance(s, Clamp):
                     self._add_bc((nu + 2 * nodes[:, None] + np.arange(2)).ravel())
-                elif isinstance(s, Symmetry):
-                    self._add_bc(nu + 2 * nodes + 1)  # theta2 = 0: rotation about the normal
             elif isinstance(s, Prescribed):
                 X = self.x_nodes[nodes]
                 comps = np.array(s.components)
@@ -269,6 +275,17 @@ class ShellModel:
                         return rotation.rotation_from_director(self.basis[nodes], D0 @ Rm.T).ravel()
 
                     self._add_bc(rows, fn)
+        self._add_symmetry_rotations()
+
+    def _add_symmetry_rotations(self) -> None:
+        """Director rotations fixed by the Symmetry supports, node by node: on one plane of
+        normal a = e1, theta2 = 0 (delta d . a = theta . (e3 x a) = theta2 there); on two
+        planes the director is on their intersection and both rotations are fixed."""
+        n = self.n_owned
+        planes = np.count_nonzero(self._symmetry_axes[:n], axis=1)
+        one, more = np.flatnonzero(planes == 1), np.flatnonzero(planes > 1)
+        self._add_bc(3 * n + 2 * one + 1)
+        self._add_bc((3 * n + 2 * more[:, None] + np.arange(2)).ravel())
 
     def _add_bc(self, rows: np.ndarray, fn=None) -> None:
         """Constrain ``rows``; ``fn(lam)`` gives their values (zero when None)."""
@@ -374,14 +391,9 @@ class ShellModel:
 
     def _locate_point_forces(self):
         rows, values = [], []
-        xo = self.x_nodes[: self.n_owned]
         for pf in self._point_forces:
-            dist = (
-                np.linalg.norm(xo - np.array(pf.point), axis=1) if len(xo) else np.array([np.inf])
-            )
-            i = int(np.argmin(dist))
-            best = self.comm.allreduce((float(dist[i]), self.comm.rank), op=MPI.MINLOC)
-            if best[1] == self.comm.rank:
+            i, _ = self._nearest_node(pf.point, on=pf.on)
+            if i >= 0:
                 rows.append(3 * i + np.arange(3))
                 values.append(np.array(pf.force))
         if rows:
@@ -640,13 +652,26 @@ class ShellModel:
             self._part_forms = {k: fem.form(v) for k, v in self._energy_terms.items()}
         return self._part_forms
 
-    def displacement_at(self, point: Sequence[float]) -> np.ndarray:
-        """Displacement of the node nearest to ``point`` (same answer on every rank)."""
+    def displacement_at(self, point: Sequence[float], *, on: str | None = None) -> np.ndarray:
+        """Displacement [m] of the node nearest to ``point`` [m], among the nodes of the
+        boundary ``on`` if given (selects one side where nodes coincide, as at a slit);
+        collective, the same answer on every rank."""
+        i, owner = self._nearest_node(point, on=on)
+        val = self.u.x.array[3 * i : 3 * i + 3].copy() if i >= 0 else None
+        return self.comm.bcast(val, root=owner)
+
+    def _nearest_node(self, point: Sequence[float], *, on: str | None) -> tuple[int, int]:
+        """(local index, owner rank) of the owned node nearest to ``point`` over all ranks,
+        among the nodes of boundary ``on`` if given; the index is -1 on the other ranks.
+        Collective; ties go to the lowest rank, then the lowest local index."""
         xo = self.x_nodes[: self.n_owned]
-        dist = np.linalg.norm(xo - np.asarray(point), axis=1) if len(xo) else np.array([np.inf])
-        i = int(np.argmin(dist)) if len(xo) else 0
+        dist = np.linalg.norm(xo - np.asarray(point, dtype=float), axis=1)
+        if on is not None:
+            dist[~self._node_mask(on)[: self.n_owned]] = np.inf
+        i = int(np.argmin(dist)) if len(dist) else -1
         best = self.comm.allreduce(
-            (float(dist[i]) if len(xo) else np.inf, self.comm.rank), op=MPI.MINLOC
+            (float(dist[i]) if i >= 0 else np.inf, self.comm.rank), op=MPI.MINLOC
         )
-        val = self.u.x.array[3 * i : 3 * i + 3].copy() if best[1] == self.comm.rank else None
-        return self.comm.bcast(val, root=best[1])
+        if not np.isfinite(best[0]):
+            raise ValueError(f"no mesh node on boundary {on!r} to locate {tuple(point)!r} on")
+        return (i if best[1] == self.comm.rank else -1), best[1]

@@ -2,8 +2,10 @@
 
 import math
 
+import dolfinx
 import numpy as np
 import pytest
+import ufl
 from mpi4py import MPI
 
 from clothfem import mesh as meshes
@@ -111,3 +113,37 @@ def test_partition_repeats():
     b = meshes.cylinder(COMM, radius=0.06, length=0.5, n_around=16, n_along=20).mesh
     assert np.array_equal(a.geometry.x, b.geometry.x)
     assert np.array_equal(a.geometry.dofmap.array, b.geometry.dofmap.array)
+
+
+@pytest.mark.parametrize(
+    "angle, n_around", [(0.5 * math.pi, 8), (0.5 * math.pi, 7), (0.9 * math.pi, 9)]
+)
+def test_cylinder_panel_spans_the_asked_angle(angle, n_around):
+    """A semi-cylinder (half-opening pi/2) and wider panels: every node (mid-side nodes
+    too) on the circle of radius R, polar angles from -angle to +angle in equal cells,
+    area 2 angle R L, the straight ``sides`` at +-angle."""
+    R, L = 2.0, 3.0
+    sm = meshes.cylinder_panel(COMM, radius=R, length=L, angle=angle, n_around=n_around, n_along=3)
+    x = sm.mesh.geometry.x
+    assert np.allclose(np.hypot(x[:, 1], x[:, 2]), R, rtol=1e-12)
+    phi = np.arctan2(x[:, 1], x[:, 2])  # from +z
+    lo = COMM.allreduce(phi.min(), op=MPI.MIN)
+    hi = COMM.allreduce(phi.max(), op=MPI.MAX)
+    assert lo == pytest.approx(-angle, abs=1e-12) and hi == pytest.approx(angle, abs=1e-12)
+    step = angle / n_around  # order 2: nodes every half cell
+    assert np.allclose(np.round((phi + angle) / step), (phi + angle) / step, atol=1e-9)
+    one = dolfinx.fem.form(dolfinx.fem.Constant(sm.mesh, 1.0) * ufl.dx(domain=sm.mesh))
+    area = COMM.allreduce(dolfinx.fem.assemble_scalar(one), op=MPI.SUM)
+    # the Q2 interpolation of an arc of cell angle h loses an area fraction < h^4 / 100
+    assert area == pytest.approx(2 * angle * R * L, rel=(2 * angle / n_around) ** 4 / 100)
+    V = dolfinx.fem.FunctionSpace(sm.mesh, ("Q", 2))
+    xs = V.tabulate_dof_coordinates()[dolfinx.fem.locate_dofs_topological(V, 1, sm.facets("sides"))]
+    assert np.allclose(np.abs(np.arctan2(xs[:, 1], xs[:, 2])), angle, atol=1e-12)
+    assert _global_count(sm, "sides") >= 6
+
+
+def test_cylinder_panel_angle_errors():
+    with pytest.raises(ValueError, match=r"angle must be in \(0, pi\) radians \(half-opening\)"):
+        meshes.cylinder_panel(COMM, radius=1.0, length=1.0, angle=math.pi, n_around=8, n_along=2)
+    with pytest.raises(ValueError, match="n_around must be >= 3 for a panel of opening 4 rad"):
+        meshes.cylinder_panel(COMM, radius=1.0, length=1.0, angle=2.0, n_around=1, n_along=2)
