@@ -121,7 +121,7 @@ def test_partition_repeats():
 def test_cylinder_panel_spans_the_asked_angle(angle, n_around):
     """A semi-cylinder (half-opening pi/2) and wider panels: every node (mid-side nodes
     too) on the circle of radius R, polar angles from -angle to +angle in equal cells,
-    area 2 angle R L, the straight ``sides`` at +-angle."""
+    area 2 angle R L, outward normals, the straight ``sides`` at +-angle."""
     R, L = 2.0, 3.0
     sm = meshes.cylinder_panel(COMM, radius=R, length=L, angle=angle, n_around=n_around, n_along=3)
     x = sm.mesh.geometry.x
@@ -135,7 +135,13 @@ def test_cylinder_panel_spans_the_asked_angle(angle, n_around):
     one = dolfinx.fem.form(dolfinx.fem.Constant(sm.mesh, 1.0) * ufl.dx(domain=sm.mesh))
     area = COMM.allreduce(dolfinx.fem.assemble_scalar(one), op=MPI.SUM)
     # the Q2 interpolation of an arc of cell angle h loses an area fraction < h^4 / 100
-    assert area == pytest.approx(2 * angle * R * L, rel=(2 * angle / n_around) ** 4 / 100)
+    tol = (2 * angle / n_around) ** 4 / 100
+    assert area == pytest.approx(2 * angle * R * L, rel=tol)
+    # every arc's cells oriented alike: the cell normal is the outward radial direction
+    X, n = ufl.SpatialCoordinate(sm.mesh), ufl.CellNormal(sm.mesh)
+    outward = dolfinx.fem.form((n[1] * X[1] + n[2] * X[2]) / R * ufl.dx(domain=sm.mesh))
+    flux = COMM.allreduce(dolfinx.fem.assemble_scalar(outward), op=MPI.SUM)
+    assert flux == pytest.approx(area, rel=tol)  # a flipped arc: -2 x its area
     V = dolfinx.fem.FunctionSpace(sm.mesh, ("Q", 2))
     xs = V.tabulate_dof_coordinates()[dolfinx.fem.locate_dofs_topological(V, 1, sm.facets("sides"))]
     assert np.allclose(np.abs(np.arctan2(xs[:, 1], xs[:, 2])), angle, atol=1e-12)
