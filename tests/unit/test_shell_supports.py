@@ -33,7 +33,7 @@ def _solve(model, lam=1.0):
 
 
 def _theta_rows_at(model, point):
-    """Global-count of constrained rotation rows of the node at ``point`` (0, 1 or 2)."""
+    """How many of the two rotations of the node nearest to ``point`` are constrained."""
     rows, _ = model.bc_rows_and_values(0.0)
     i, _ = model._nearest_node(point, on=None)
     mine = 0
@@ -205,7 +205,7 @@ def test_point_forces_and_displacements_on_the_lips_of_a_slit(slit):
     both_low = _solve(_slit_model(slit, "lip_lower"))
     w_low = both_low.displacement_at((L, 0.0, 0.0), on="lip_lower")[2]
     w_up = both_low.displacement_at((L, 0.0, 0.0), on="lip_upper")[2]
-    assert w_low > (1 + 1e-3) * w_up
+    assert w_low > 1.1 * w_up  # measured 1.17: the lower finger carries P/12 more
 
 
 def test_unknown_boundary_names_are_one_line_errors(slit):
