@@ -139,6 +139,8 @@ def build_model(
         degree=scene["element"]["degree"],
         quadrature=Quadrature(
             reduced=scene["element"]["reduced_quadrature"],
+            scheme=scene["element"]["scheme"],
+            psri_factor=scene["element"]["psri_factor"],
             stabilization=scene["element"]["stabilization"],
         ),
     )

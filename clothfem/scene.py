@@ -201,10 +201,28 @@ SCHEMA: dict[str, Section] = {
                 lo=1,
                 hi=10,
             ),
+            "scheme": Key(
+                "choice",
+                "integration of membrane and shear: 'psri' (partial selective reduced "
+                "integration, alpha = psri_factor t^2/h^2 of them fully integrated: no "
+                "spurious modes; docs/shell_element.md) or 'sri' (selective reduced, for "
+                "comparison)",
+                default="psri",
+                choices=("psri", "sri"),
+            ),
+            "psri_factor": Key(
+                "float",
+                "psri: the factor c of alpha = min(1, c t^2 / h^2), h the cell diameter",
+                default=1.0,
+                lo=0.0,
+                hi=1e6,
+                open_lo=True,
+            ),
             "stabilization": Key(
                 "float",
-                "alpha x the fully integrated membrane energy blended into the reduced one "
-                "(removes the spurious mode of reduced integration, stiffens ovalisation)",
+                "sri only: alpha x the fully integrated membrane energy blended into the "
+                "reduced one (removes the spurious mode of reduced integration, stiffens "
+                "ovalisation)",
                 default=0.0,
                 lo=0.0,
                 hi=1.0,
@@ -530,6 +548,9 @@ def validate(data: dict[str, Any]) -> dict[str, Any]:
             "mesh.n_around",
             f"must be a multiple of 4 for a cylinder, got {out['mesh']['n_around']}",
         )
+    el = out["element"]
+    if el["scheme"] == "psri" and el["stabilization"] != 0.0:
+        _fail("element.stabilization", "is a parameter of element.scheme = 'sri' only")
     _validate_body(data, out)
     return out
 

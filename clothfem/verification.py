@@ -34,7 +34,10 @@ from .shell import (
     EdgeTraction,
     FabricMaterial,
     Gravity,
+    PointForce,
     Prescribed,
+    Pressure,
+    Quadrature,
     ShellModel,
     Symmetry,
 )
@@ -120,7 +123,7 @@ def arc_solution(*, moment: float, EI: float, thickness: float) -> tuple[float, 
     return moment / (EI * s * s), s
 
 
-def _strip_model(comm, nx, ny, loads, supports=None):
+def _strip_model(comm, nx, ny, loads, supports=None, quadrature=None):
     s = STRIP
     sm = meshes.strip(comm, length=s["length"], width=s["width"], nx=nx, ny=ny)
     mat = FabricMaterial.isotropic(E=s["E"], nu=0.0)
@@ -130,6 +133,7 @@ def _strip_model(comm, nx, ny, loads, supports=None):
         thickness=s["thickness"],
         loads=loads,
         supports=supports or [Clamp("root")],
+        quadrature=quadrature or Quadrature(),
     )
 
 
@@ -139,13 +143,18 @@ def _EI() -> float:
 
 
 def run_rollup(
-    *, nx: int = 20, ny: int = 2, steps: int = 10, comm: MPI.Comm = MPI.COMM_WORLD
+    *,
+    nx: int = 20,
+    ny: int = 2,
+    steps: int = 10,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    quadrature: Quadrature | None = None,
 ) -> tuple[Result, ShellModel]:
     """End moment 2 pi EI / L: |tip position - root| / L (exact 0)."""
     t0 = time.perf_counter()
     L, b = STRIP["length"], STRIP["width"]
     m = 2 * math.pi * _EI() / L / b
-    model = _strip_model(comm, nx, ny, [EdgeMoment("tip", (0.0, -m, 0.0))])
+    model = _strip_model(comm, nx, ny, [EdgeMoment("tip", (0.0, -m, 0.0))], quadrature=quadrature)
     inc = 1.0 / steps
     recs = solve_static(model, stepping=LoadStepping(initial_increment=inc, max_increment=inc))
     tip = np.array([L, 0.0, 0.0]) + model.displacement_at((L, 0.0, 0.0))
@@ -163,13 +172,20 @@ def run_rollup(
 
 
 def run_elastica(
-    *, k: float, nx: int = 20, ny: int = 2, comm: MPI.Comm = MPI.COMM_WORLD
+    *,
+    k: float,
+    nx: int = 20,
+    ny: int = 2,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    quadrature: Quadrature | None = None,
 ) -> tuple[Result, Result]:
     """Dead end shear P = k EI / L^2: (u/L, w/L) against :func:`elastica_tip`."""
     t0 = time.perf_counter()
     L, b = STRIP["length"], STRIP["width"]
     P = k * _EI() / L**2
-    model = _strip_model(comm, nx, ny, [EdgeTraction("tip", (0.0, 0.0, P / b))])
+    model = _strip_model(
+        comm, nx, ny, [EdgeTraction("tip", (0.0, 0.0, P / b))], quadrature=quadrature
+    )
     recs = solve_static(model, stepping=LoadStepping(initial_increment=0.25, max_increment=0.5))
     tip = model.displacement_at((L, 0.0, 0.0))
     wall = time.perf_counter() - t0
@@ -184,14 +200,19 @@ def run_elastica(
 
 
 def run_arc_bending(
-    *, nx: int, ny: int = 1, angle: float = 0.5 * math.pi, comm: MPI.Comm = MPI.COMM_WORLD
+    *,
+    nx: int,
+    ny: int = 1,
+    angle: float = 0.5 * math.pi,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    quadrature: Quadrature | None = None,
 ) -> Result:
     """End moment bending the strip to a circular arc of opening ``angle``; returns the
     relative L2 error of the displacement field against the exact arc."""
     t0 = time.perf_counter()
     L, b = STRIP["length"], STRIP["width"]
     m = angle * _EI() / L / b
-    model = _strip_model(comm, nx, ny, [EdgeMoment("tip", (0.0, -m, 0.0))])
+    model = _strip_model(comm, nx, ny, [EdgeMoment("tip", (0.0, -m, 0.0))], quadrature=quadrature)
     recs = solve_static(model, stepping=LoadStepping(initial_increment=0.5, max_increment=0.5))
     k, stretch = arc_solution(moment=m * b, EI=_EI(), thickness=STRIP["thickness"])
     r = stretch / k
@@ -214,7 +235,13 @@ def run_arc_bending(
     )
 
 
-def run_scordelis_lo(*, n: int, half: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> Result:
+def run_scordelis_lo(
+    *,
+    n: int,
+    half: bool = False,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    quadrature: Quadrature | None = None,
+) -> Result:
     """Scordelis-Lo roof, full model with ``n`` x ``n`` cells: R = 25, L = 50, 80 degree
     arc, t = 0.25, E = 4.32e8, nu = 0, self weight 90 per unit area, rigid diaphragms at
     the ends (u_y = u_z = 0), free straight edges. Solved at a load factor of 1e-3 and
@@ -246,7 +273,12 @@ def run_scordelis_lo(*, n: int, half: bool = False, comm: MPI.Comm = MPI.COMM_WO
             Prescribed(crest_midspan, displacement=(0.0, 0.0, 0.0), components=(0,)),
         ]
     model = ShellModel(
-        sm, material=mat, thickness=t, loads=[Gravity((0.0, 0.0, -1.0))], supports=supports
+        sm,
+        material=mat,
+        thickness=t,
+        loads=[Gravity((0.0, 0.0, -1.0))],
+        supports=supports,
+        quadrature=quadrature or Quadrature(),
     )
     lam = 1e-3
     solver = NewtonSolver(model)
@@ -265,3 +297,245 @@ def run_scordelis_lo(*, n: int, half: bool = False, comm: MPI.Comm = MPI.COMM_WO
         time.perf_counter() - t0,
         its,
     )
+
+
+# ---------------------------------------------------------------- load-deflection curves
+# Sze, Liu & Lo (2004), Finite Elem. Anal. Des. 40:1551-1569, problem 3.7 (pinched
+# semi-cylinder), their reference curve (ABAQUS S4R, 40 x 40): P / Pmax -> -w at the load.
+SEMICYLINDER_REFERENCE = {
+    0.1: 0.16100,
+    0.25: 0.48537,
+    0.5: 1.32653,
+    0.75: 1.56584,
+    1.0: 1.71505,
+}
+# MacNeal & Harder (1985), Finite Elem. Anal. Des. 1:3-20: pinched cylinder with end
+# diaphragms, radial displacement under a unit load (linear).
+PINCHED_CYLINDER_REFERENCE = 1.8248e-5
+
+
+@dataclass(frozen=True)
+class CurvePoint:
+    """One point of a load-deflection curve: the load fraction and the Result there."""
+
+    fraction: float
+    result: Result
+
+
+def _curve(model, *, fractions, measure, reference, name, mesh, stepping, t0):
+    """Solve through ``fractions`` of the load; ``measure(model)`` at each against
+    ``reference(fraction)``. Relative errors (absolute where the reference is 0)."""
+    values: dict[float, float] = {}
+    fr = np.asarray(sorted(fractions), dtype=float)
+
+    def on_step(rec):
+        hit = fr[np.isclose(fr, rec.load_factor, rtol=0, atol=1e-12)]
+        if hit.size:
+            values[float(hit[0])] = measure(model)
+
+    recs = solve_static(model, stepping=stepping, targets=fr, on_step=on_step)
+    wall, its = time.perf_counter() - t0, sum(r.newton_iterations for r in recs)
+    out = []
+    for f in fr:
+        ref, val = reference(float(f)), values[float(f)]
+        err = abs(val - ref) / abs(ref) if ref != 0 else abs(val)
+        out.append(CurvePoint(float(f), Result(name, mesh, val, ref, err, wall, its)))
+    return out
+
+
+def rollup_tip(fraction: float) -> tuple[float, float]:
+    """Exact tip of the strip under the end moment ``fraction`` x 2 pi EI / L (a circular
+    arc of opening theta = 2 pi fraction): (u/L, w/L), u the axial, w the transverse
+    displacement of the tip (Sze et al. 2004, problem 3.2)."""
+    th = 2 * math.pi * fraction
+    return math.sin(th) / th - 1.0, (1.0 - math.cos(th)) / th
+
+
+def run_rollup_curve(
+    *,
+    nx: int,
+    ny: int = 1,
+    fractions=(0.25, 0.5, 0.75, 1.0),
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    quadrature: Quadrature | None = None,
+) -> list[CurvePoint]:
+    """Roll-up under the end moment (Sze 3.2): the tip's transverse deflection w/L
+    at several load fractions (at fraction 1 the exact w is 0: the error is |w|/L there)."""
+    t0 = time.perf_counter()
+    L, b = STRIP["length"], STRIP["width"]
+    m = 2 * math.pi * _EI() / L / b
+    model = _strip_model(comm, nx, ny, [EdgeMoment("tip", (0.0, -m, 0.0))], quadrature=quadrature)
+
+    def tip(mdl):
+        return float(mdl.displacement_at((L, 0.0, 0.0))[2] / L)
+
+    return _curve(
+        model,
+        fractions=fractions,
+        measure=tip,
+        reference=lambda f: rollup_tip(f)[1] if f < 1 else 0.0,
+        name="roll-up w/L",
+        mesh=f"{nx}x{ny}",
+        stepping=LoadStepping(initial_increment=0.05, max_increment=0.1),
+        t0=t0,
+    )
+
+
+def run_elastica_curve(
+    *,
+    nx: int,
+    ny: int = 1,
+    k_max: float = 4.0,
+    fractions=(0.25, 0.5, 1.0),
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    quadrature: Quadrature | None = None,
+) -> list[CurvePoint]:
+    """Cantilever under a dead end shear P = fraction x k_max EI / L^2 (Sze 3.1, the
+    elastica): tip deflection w/L against :func:`elastica_tip` at each fraction."""
+    t0 = time.perf_counter()
+    L, b = STRIP["length"], STRIP["width"]
+    P = k_max * _EI() / L**2
+    model = _strip_model(
+        comm, nx, ny, [EdgeTraction("tip", (0.0, 0.0, P / b))], quadrature=quadrature
+    )
+    return _curve(
+        model,
+        fractions=fractions,
+        measure=lambda mdl: float(mdl.displacement_at((L, 0.0, 0.0))[2] / L),
+        reference=lambda f: elastica_tip(f * k_max)[1],
+        name=f"elastica w/L (PL2/EI up to {k_max:g})",
+        mesh=f"{nx}x{ny}",
+        stepping=LoadStepping(initial_increment=0.125, max_increment=0.25),
+        t0=t0,
+    )
+
+
+def run_semicylinder(
+    *,
+    n: int,
+    fractions=tuple(SEMICYLINDER_REFERENCE),
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    quadrature: Quadrature | None = None,
+) -> list[CurvePoint]:
+    """Pinched semi-cylinder (Sze 3.7): R = 1.016, L = 3.048, t = 0.03, E = 2.0685e7,
+    nu = 0.3; clamped at x = 0, free at x = L, symmetry (u_z = 0, director in the plane)
+    on the straight edges, P up to 2000 downwards at the top of the free end; -w there
+    against Sze's reference curve. ``n`` x ``n`` cells on the whole semi-cylinder."""
+    t0 = time.perf_counter()
+    R, L, t, P = 1.016, 3.048, 0.03, 2000.0
+    sm = meshes.cylinder_panel(comm, radius=R, length=L, angle=0.5 * math.pi, n_around=n, n_along=n)
+    model = ShellModel(
+        sm,
+        material=FabricMaterial.isotropic(E=2.0685e7, nu=0.3),
+        thickness=t,
+        loads=[PointForce((L, 0.0, R), (0.0, 0.0, -P))],
+        supports=[Clamp("start"), Symmetry("sides", axis=2)],
+        quadrature=quadrature or Quadrature(),
+    )
+    return _curve(
+        model,
+        fractions=fractions,
+        measure=lambda mdl: float(-mdl.displacement_at((L, 0.0, R))[2]),
+        reference=lambda f: SEMICYLINDER_REFERENCE[f],
+        name="pinched semi-cylinder -w",
+        mesh=f"{n}x{n}",
+        stepping=LoadStepping(initial_increment=0.05, max_increment=0.1),
+        t0=t0,
+    )
+
+
+def run_pinched_cylinder(
+    *,
+    n: int,
+    thickness: float = 3.0,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    quadrature: Quadrature | None = None,
+) -> Result:
+    """Pinched cylinder with rigid end diaphragms (MacNeal & Harder 1985): R = 300, L = 600,
+    E = 3e6, nu = 0.3, t = 3, two opposite unit loads at midspan; one octant with ``n`` x
+    ``n`` cells. A ``thickness`` other than 3 scales E by (3/t)^3 (the same bending
+    stiffness, a stiffer membrane): the locking study; the reference is then not exact."""
+    t0 = time.perf_counter()
+    R, L = 300.0, 600.0
+    sm = meshes.cylinder_panel(
+        comm, radius=R, length=L / 2, angle=0.25 * math.pi, n_around=n, n_along=n
+    )
+    _rotate_about_x(sm, 0.25 * math.pi)  # the arc from the crest (y = 0) to z = 0
+    tol = 1e-6 * R
+    model = ShellModel(
+        sm,
+        material=FabricMaterial.isotropic(E=3.0e6 * (3.0 / thickness) ** 3, nu=0.3),
+        thickness=thickness,
+        loads=[PointForce((L / 2, 0.0, R), (0.0, 0.0, -0.25))],  # a quarter of P = 1
+        supports=[
+            Prescribed("start", displacement=(0.0, 0.0, 0.0), components=(1, 2)),
+            Symmetry("end", axis=0),
+            Symmetry(lambda x: np.abs(x[1]) < tol, axis=1),
+            Symmetry(lambda x: np.abs(x[2]) < tol, axis=2),
+        ],
+        quadrature=quadrature or Quadrature(),
+    )
+    its = _solve_small_load(model, prefix="pinch_")
+    w = -model.displacement_at((L / 2, 0.0, R))[2]
+    ref = PINCHED_CYLINDER_REFERENCE
+    name = f"pinched cylinder w (t/R = 1/{R / thickness:g})"
+    return Result(name, f"{n}x{n}", w, ref, abs(w - ref) / ref, time.perf_counter() - t0, its)
+
+
+def _rotate_about_x(sm, angle: float) -> None:
+    """Rotate a mesh's geometry about the x axis by ``angle`` (from +z towards +y)."""
+    x = sm.mesh.geometry.x
+    c, s = math.cos(angle), math.sin(angle)
+    y, z = x[:, 1].copy(), x[:, 2].copy()
+    x[:, 1], x[:, 2] = c * y + s * z, -s * y + c * z
+
+
+# Clamped square plate under uniform pressure, Kirchhoff solution: w_centre = c q a^4 / D
+# with c = 0.00126532 (Timoshenko & Woinowsky-Krieger 1959, Sec. 44, table 35: 0.00126).
+CLAMPED_PLATE_COEFFICIENT = 0.00126532
+
+
+def run_clamped_plate(
+    *,
+    n: int,
+    slenderness: float,
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    quadrature: Quadrature | None = None,
+) -> Result:
+    """Clamped square plate (a = 1, nu = 0.3, t = a / ``slenderness``, E such that
+    D = E t^3 / 12 (1 - nu^2) = 1) under a uniform pressure giving w ~ 1e-3 t: centre
+    deflection against Kirchhoff's c q a^4 / D. The transverse-shear correction of
+    Reissner-Mindlin theory is O((t/a)^2) (below 0.1 % at t/a = 1/100): a locking element
+    shows as a deflection far below the reference."""
+    t0 = time.perf_counter()
+    a, nu, D = 1.0, 0.3, 1.0
+    t = a / slenderness
+    E = 12 * (1 - nu**2) * D / t**3
+    q = 1e-3 * t * D / (CLAMPED_PLATE_COEFFICIENT * a**4)
+    sm = meshes.strip(comm, length=a, width=a, nx=n, ny=n)
+    model = ShellModel(
+        sm,
+        material=FabricMaterial.isotropic(E=E, nu=nu),
+        thickness=t,
+        loads=[Pressure(q, follower=False)],
+        supports=[Clamp("root"), Clamp("tip"), Clamp("sides")],
+        quadrature=quadrature or Quadrature(),
+    )
+    its = _solve_small_load(model, prefix="plate_")
+    w = abs(model.displacement_at((0.5 * a, 0.0, 0.0))[2]) * D / (q * a**4)
+    ref = CLAMPED_PLATE_COEFFICIENT
+    name = f"clamped plate w D/(q a^4) (t/a = 1/{slenderness:g})"
+    return Result(name, f"{n}x{n}", w, ref, abs(w - ref) / ref, time.perf_counter() - t0, its)
+
+
+def _solve_small_load(model: ShellModel, *, prefix: str) -> int:
+    """The linear solution of a linear-regime benchmark: one full Newton step from the
+    reference state at load factor 1, K(0) du = F (the references are linear theory).
+    Returns the iterations (1)."""
+    from petsc4py import PETSc
+
+    PETSc.Options()[prefix + "snes_max_it"] = 1
+    _, its, _, _ = NewtonSolver(model, prefix=prefix).solve(1.0)
+    if its != 1:
+        raise RuntimeError(f"{prefix.rstrip('_')}: the linear step was not taken")
+    return its

@@ -54,33 +54,54 @@ __all__ = ["ShellModel", "Quadrature"]
 
 @dataclass(frozen=True, kw_only=True)
 class Quadrature:
-    """Quadrature degrees: ``full`` for bending, ``reduced`` for membrane and shear.
+    """How the membrane and transverse-shear energies are integrated (bending: ``full``).
 
-    The defaults (4 and 2) are 3x3 and 2x2 Gauss points on quadrilaterals. This selective
-    rule leaves one spurious zero-energy mode on an unsupported tube (7 zero eigenvalues
-    instead of 6); supports such as a clamped ring remove it. ``stabilization`` = alpha
-    blends alpha x the fully integrated membrane energy into the reduced one, which removes
-    the mode but stiffens inextensional (ovalisation) modes: x6 on a coarse tube at
-    alpha = 1e-3 (README). Default 0.
+    ``scheme = "psri"`` (default): partial selective reduced integration (Arnold & Brezzi
+    1993/1997; the weight of FEniCS-Shells): in each cell a fraction alpha of the membrane
+    and shear energies is integrated with the full rule and 1 - alpha with the reduced one,
+
+        alpha = min(1, psri_factor x t^2 / h^2),    h = the cell diameter.
+
+    The fully integrated part has no zero-energy modes of its own, so the element has exactly
+    the six rigid modes; because alpha ~ (t/h)^2 is the ratio of bending to membrane
+    stiffness at the mesh scale, it adds at most O(1) x the bending stiffness to
+    inextensional modes and so does not lock as t -> 0 (docs/shell_element.md).
+
+    ``scheme = "sri"``: selective reduced integration (Hughes 1987) with a constant blend
+    ``stabilization`` of the fully integrated membrane energy (0: plain SRI, which leaves a
+    spurious zero-energy mode on a free tube); kept for comparison.
+
+    The defaults ``full`` = 4 and ``reduced`` = 2 are 3x3 and 2x2 Gauss points on
+    quadrilaterals.
     """
 
     full: int = 4
     reduced: int = 2
+    scheme: str = "psri"
+    psri_factor: float = 1.0
     stabilization: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("full", "reduced"):
             if getattr(self, name) not in range(1, 11):
                 raise ValueError(f"Quadrature {name} must be an integer in 1..10")
+        if self.scheme not in ("psri", "sri"):
+            raise ValueError(f"Quadrature scheme must be 'psri' or 'sri', got {self.scheme!r}")
+        if not (0.0 < self.psri_factor <= 1e6):
+            raise ValueError(
+                f"Quadrature psri_factor must be in (0, 1e6], got {self.psri_factor!r}"
+            )
         if not (0.0 <= self.stabilization <= 1.0):
             raise ValueError(
                 f"Quadrature stabilization must be in [0, 1], got {self.stabilization!r}"
             )
+        if self.scheme == "psri" and self.stabilization != 0.0:
+            raise ValueError("Quadrature stabilization is a parameter of scheme 'sri' only")
 
 
-def _blend(density, dx_r, dx_f, alpha: float):
+def _blend(density, dx_r, dx_f, alpha):
     """(1 - alpha) x reduced + alpha x full quadrature of an energy density."""
-    if alpha == 0.0:
+    if isinstance(alpha, float) and alpha == 0.0:
         return density * dx_r
     return (1.0 - alpha) * density * dx_r + alpha * density * dx_f
 
@@ -317,12 +338,20 @@ class ShellModel:
         dx_f = ufl.dx(domain=mesh, metadata={"quadrature_degree": quadrature.full})
         dx_r = ufl.dx(domain=mesh, metadata={"quadrature_degree": quadrature.reduced})
         self.dx_full, self.dx_reduced = dx_f, dx_r
-        alpha = quadrature.stabilization
         ds = ufl.Measure("ds", domain=mesh, subdomain_data=self.surface.facet_tags)
+        psi_m = membrane_energy(eps, self.Q, self.t)
+        psi_s = shear_energy(gamma, self.kG, self.t)
+        if quadrature.scheme == "psri":
+            self.alpha = self._psri_weight(quadrature.psri_factor)
+            membrane, shear = (_blend(p, dx_r, dx_f, self.alpha) for p in (psi_m, psi_s))
+        else:
+            self.alpha = None
+            membrane = _blend(psi_m, dx_r, dx_f, quadrature.stabilization)
+            shear = psi_s * dx_r
         self._energy_terms = {
-            "membrane": _blend(membrane_energy(eps, self.Q, self.t), dx_r, dx_f, alpha),
+            "membrane": membrane,
             "bending": bending_energy(kappa, self.Q, self.t) * dx_f,
-            "shear": shear_energy(gamma, self.kG, self.t) * dx_r,
+            "shear": shear,
         }
         Pi = sum(self._energy_terms.values())
 
@@ -388,6 +417,23 @@ class ShellModel:
         else:
             self._Rm_form = self._wm_form = None
         self._point_rows, self._point_values = self._locate_point_forces()
+
+    def _psri_weight(self, factor: float) -> fem.Function:
+        """Cellwise PSRI weight alpha = min(1, factor t^2 / h^2) (DG0), h the cell diameter
+        (largest distance between two of its vertices, as UFL's CellDiameter)."""
+        W = fem.FunctionSpace(self.mesh, ("DG", 0))
+        geo = self.mesh.geometry
+        n_vertices = 4 if self.mesh.topology.cell_type.name == "quadrilateral" else 3
+        corners = geo.x[geo.dofmap.array.reshape(-1, geo.dofmap.offsets[1])[:, :n_vertices]]
+        pairs = [(a, b) for a in range(n_vertices) for b in range(a + 1, n_vertices)]
+        h = np.max([np.linalg.norm(corners[:, a] - corners[:, b], axis=1) for a, b in pairs], 0)
+        alpha = fem.Function(W, name="psri_weight")
+        cells = np.arange(len(h), dtype=np.int32)
+        alpha.x.array[W.dofmap.list.array.reshape(-1)[cells]] = np.minimum(
+            1.0, factor * self.thickness**2 / h**2
+        )
+        alpha.x.scatter_forward()
+        return alpha
 
     def _locate_point_forces(self):
         rows, values = [], []

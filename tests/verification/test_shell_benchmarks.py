@@ -1,4 +1,4 @@
-"""Shell verification against exact solutions and published benchmarks (issue 2)."""
+"""Shell verification against exact solutions and published benchmarks."""
 
 import math
 
@@ -32,8 +32,10 @@ def test_scordelis_lo_roof():
 
 
 def test_mesh_convergence_rate_is_cubic_in_L2():
-    """Quadratic elements: L2 displacement error O(h^3) against this model's exact arc."""
-    errs = [V.run_arc_bending(nx=n).value for n in (4, 8, 16)]
+    """Quadratic elements: L2 displacement error O(h^3) against this model's exact arc
+    (from 8 cells on: the PSRI weight t^2/h^2 changes with h, and at 4 cells of L/t = 25
+    the fully integrated part still stiffens the arc, rate 2.5 from 4 to 8)."""
+    errs = [V.run_arc_bending(nx=n).value for n in (8, 16, 32)]
     rates = [math.log2(errs[i] / errs[i + 1]) for i in range(2)]
     assert min(rates) > 2.8, (errs, rates)
 
@@ -67,3 +69,54 @@ def test_prescribed_rotation_bends_a_free_tip_into_an_arc():
     R = 2 * L / math.pi
     tip = model.displacement_at((L, 0.0, 0.0)) + (L, 0.0, 0.0)
     assert math.isclose(tip[0], R, rel_tol=1e-3) and math.isclose(tip[2], R, rel_tol=1e-3)
+
+
+def _errors(points):
+    return [p.result.error for p in points]
+
+
+def test_rollup_curve_against_the_exact_circle():
+    """Sze 3.2: tip deflection under the end moment at 1/4, 1/2, 3/4 and all of 2 pi EI/L
+    against the exact arc; the error shrinks from 10 to 20 cells, below 1e-3 on 20."""
+    coarse, fine = (V.run_rollup_curve(nx=n) for n in (10, 20))
+    assert max(_errors(fine)) < 1e-3, fine
+    assert all(f < c for f, c in zip(_errors(fine), _errors(coarse), strict=True))
+
+
+def test_elastica_curve_against_the_shooting_solution():
+    """Sze 3.1: tip deflection under a dead end shear at PL^2/EI = 1, 2, 4 against the
+    exact elastica; the error shrinks from 10 to 20 cells, below 1e-4 on 20."""
+    coarse, fine = (V.run_elastica_curve(nx=n) for n in (10, 20))
+    assert max(_errors(fine)) < 1e-4, fine
+    assert all(f < c for f, c in zip(_errors(fine), _errors(coarse), strict=True))
+
+
+def test_pinched_semicylinder_against_sze():
+    """Sze 3.7 at P/Pmax = 0.1, 0.25, 0.5, 0.75, 1 against the published curve (ABAQUS S4R
+    40 x 40). The plain selective rule drifted away with refinement (+1.0 % at 16x16, +3.6 %
+    at 32x32 at P = 2000); the default element converges: within 0.3 % at P = 2000 on
+    12x12 and 16x16, within 1.7 % everywhere (the published curve's steep part near 0.25
+    Pmax is where the finer meshes of docs/results/verification.md settle at +1.5 %)."""
+    for n in (12, 16):
+        pts = V.run_semicylinder(n=n)
+        assert pts[-1].result.error < 3e-3, pts[-1]
+        assert max(_errors(pts)) < 0.017, pts
+
+
+def test_pinched_cylinder_with_diaphragms():
+    """MacNeal & Harder: 1.8248e-5 (thin-shell theory). Within 1.3 % on 8x8 and 16x16 (a
+    shear-deformable shell under a point load differs from thin-shell theory by a term that
+    grows like log(1/h): +0.35 % on 8x8, +1.24 % on 16x16)."""
+    for n in (8, 16):
+        res = V.run_pinched_cylinder(n=n)
+        assert res.error < 0.013, res
+
+
+@pytest.mark.parametrize("slenderness", [100.0, 1000.0, 10000.0])
+def test_clamped_plate_does_not_lock(slenderness):
+    """Clamped square plate under pressure, t/a from 1/100 to 1/10000: the centre
+    deflection stays within 0.2 % of Kirchhoff's 0.00126532 q a^4/D on 8x8 and 16x16 (a
+    locking element would fall towards 0 as t/a shrinks)."""
+    for n in (8, 16):
+        res = V.run_clamped_plate(n=n, slenderness=slenderness)
+        assert res.error < 2e-3, res
