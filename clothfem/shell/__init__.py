@@ -12,11 +12,12 @@ from .conditions import (
     Pressure,
     Symmetry,
 )
-from .material import FabricMaterial
+from .material import DecrimpingFabric, FabricMaterial
 from .model import Quadrature, ShellModel
 
 __all__ = [
     "Clamp",
+    "DecrimpingFabric",
     "EdgeMoment",
     "EdgeTraction",
     "FabricMaterial",

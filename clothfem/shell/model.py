@@ -47,7 +47,14 @@ from .conditions import (
     Symmetry,
 )
 from .kinematics import lamina_frame, shell_strains
-from .material import FabricMaterial, bending_energy, membrane_energy, shear_energy
+from .material import (
+    DecrimpingFabric,
+    FabricMaterial,
+    bending_energy,
+    decrimping_membrane_energy,
+    membrane_energy,
+    shear_energy,
+)
 
 __all__ = ["ShellModel", "Quadrature"]
 
@@ -339,7 +346,11 @@ class ShellModel:
         dx_r = ufl.dx(domain=mesh, metadata={"quadrature_degree": quadrature.reduced})
         self.dx_full, self.dx_reduced = dx_f, dx_r
         ds = ufl.Measure("ds", domain=mesh, subdomain_data=self.surface.facet_tags)
-        psi_m = membrane_energy(eps, self.Q, self.t)
+        if isinstance(mat, DecrimpingFabric):  # yarn-direction stiffening (same weights)
+            self.yarn = fem.Constant(mesh, mat.yarn_parameters())
+            psi_m = decrimping_membrane_energy(eps, self.Q, self.yarn, self.t)
+        else:
+            psi_m = membrane_energy(eps, self.Q, self.t)
         psi_s = shear_energy(gamma, self.kG, self.t)
         if quadrature.scheme == "psri":
             self.alpha = self._psri_weight(quadrature.psri_factor)
