@@ -20,6 +20,16 @@ nodes, max penetration, min multiplier, iterations, wall time), plus the fabric 
 to XDMF. PNG snapshots (fabric + ellipsoids) are drawn at the settled state, at about every
 quarter of the motion and at the end; ``torque_angle.png`` is (re)drawn at the end, also when
 the run stops early.
+
+Resistance measures (every integrator): ``joint_work`` [J] is the cumulative work the measured
+joint (the torque segment's hinge) does against the garment, -int tau_seg . omega dt with
+tau_seg the torque of the contact forces on that segment about its joint
+(:func:`clothfem.report.joint_work`: trapezoid over the quasi-static increments and the
+Newmark steps, one impulse per explicit step); ``dissipation_total`` [J] is the contact
+layers' frictional dissipation and ``dissipation_material`` [J] the fabric's (0: the St.
+Venant-Kirchhoff fabric is elastic). The explicit rows also carry ``external_work`` (the
+work of gravity [J]) for the energy balance. :func:`clothfem.run.run_scene` adds the
+per-phase torque statistics to ``summary.json`` (:func:`clothfem.report.resistance_measures`).
 """
 
 from __future__ import annotations
