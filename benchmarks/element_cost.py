@@ -1,0 +1,66 @@
+"""Cost of the shell element's force assembly, the explicit step's dominant part: the
+default partial selective reduced integration (PSRI) against the selective rule (SRI), on
+the arm-sleeve mesh, measured in one run.
+
+Both models are built on the same sleeve (crimped cotton, t = 1 mm, the scene's n_around x
+n_along cells) with the same random state; ``ShellModel.forces`` (one internal-force
+assembly with the director update and the nodal chain rule, what the explicit step calls
+once per step on a new state) is timed on two alternating states, in rounds that alternate
+the two models, and the ratio of the medians is reported. Times are the process CPU time (time.process_time), so that
+other jobs on the machine change them less than they change wall time.
+
+    .venv/bin/python benchmarks/element_cost.py [--mesh 24x30] [--calls 200] [--rounds 5]
+"""
+
+import argparse
+import time
+
+import numpy as np
+from mpi4py import MPI
+
+from clothfem import mesh as meshes
+from clothfem.io import rank0_print
+from clothfem.shell import FabricMaterial, Quadrature, ShellModel
+
+parser = argparse.ArgumentParser()
+parser.add_argument("--mesh", default="24x30", help="n_around x n_along")
+parser.add_argument("--calls", type=int, default=200, help="force assemblies per round")
+parser.add_argument("--rounds", type=int, default=5)
+args = parser.parse_args()
+na, nl = (int(v) for v in args.mesh.split("x"))
+comm = MPI.COMM_WORLD
+
+sleeve = meshes.cylinder(comm, radius=0.06, length=0.5, n_around=na, n_along=nl)
+cotton = FabricMaterial(E1=1.2e6, E2=1.2e6, G12=0.4e6, nu12=0.0, rho=1500.0)
+models = {
+    name: ShellModel(sleeve, material=cotton, thickness=1e-3, quadrature=q)
+    for name, q in (("PSRI", Quadrature()), ("SRI", Quadrature(scheme="sri")))
+}
+rng = np.random.default_rng(1 + comm.rank)
+times: dict[str, list[float]] = {name: [] for name in models}
+states = {}
+for name, model in models.items():
+    model.set_load_factor(1.0)
+    states[name] = []
+    for _ in range(2):
+        x = model.create_vector()
+        x.setArray(1e-3 * rng.standard_normal(x.getLocalSize()))
+        states[name].append(x)
+for _ in range(args.rounds):
+    for name, model in models.items():
+        xs = states[name]
+        r, fe = xs[0].duplicate(), xs[0].duplicate()
+        model.forces(xs[1], r, fe)  # warm-up (and JIT on the first round)
+        comm.Barrier()
+        t0 = time.process_time()
+        for i in range(args.calls):
+            model.forces(xs[i % 2], r, fe)
+        comm.Barrier()
+        times[name].append((time.process_time() - t0) / args.calls)
+med = {name: float(np.median(v)) for name, v in times.items()}
+rank0_print(
+    f"sleeve {args.mesh} ({na * nl} cells), {comm.size} rank(s), {args.rounds} rounds of "
+    f"{args.calls} force assemblies; median CPU ms per assembly: "
+    + ", ".join(f"{k} {1e3 * v:.3f}" for k, v in med.items())
+    + f"; PSRI / SRI = {med['PSRI'] / med['SRI']:.3f}"
+)
