@@ -55,6 +55,9 @@ def benchmark_rows(q):
             )
         )
     for n in (8, 16):
+        hemi = V.run_hemisphere(n=n, quadrature=q)
+        rows.append(("hemisphere, 18-degree hole (MacNeal-Harder)", f"{n}x{n}", "F = 1", hemi))
+    for n in (8, 16):
         rows.append(
             ("Scordelis-Lo roof", f"{n}x{n}", "self weight", V.run_scordelis_lo(n=n, quadrature=q))
         )

@@ -319,6 +319,55 @@ def _arc_cell_counts(span: float, n_cells: int) -> list[int]:
     return [len(c) for c in np.array_split(np.arange(n_cells), n_arcs)]
 
 
+def sphere_quarter(
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    *,
+    radius: float,
+    hole_angle: float,
+    n: int,
+    cell: str = "quadrilateral",
+    order: int = 2,
+) -> SurfaceMesh:
+    """A quarter of a hemisphere (x, y, z >= 0) of centre 0 with a polar hole: colatitude in
+    [``hole_angle``, pi/2] [rad], longitude in [0, pi/2]; ``n`` x ``n`` cells.
+
+    Boundaries: ``hole`` (the polar edge), ``equator`` (z = 0), ``xz`` (the meridian in the
+    plane y = 0) and ``yz`` (x = 0). Used by the hemisphere benchmark (MacNeal & Harder
+    1985: an 18-degree hole).
+    """
+    radius = _positive("radius", radius)
+    if not (0 < hole_angle < 0.5 * math.pi):
+        raise ValueError(f"hole_angle must be in (0, pi/2) radians, got {hole_angle!r}")
+    n = _positive_int("n", n)
+    _check_cell(cell, order)
+    s, c = math.sin(hole_angle), math.cos(hole_angle)
+
+    def build(gmsh):
+        geo = gmsh.model.geo
+        centre, pole = geo.addPoint(0, 0, 0), geo.addPoint(0, 0, radius * c)
+        a, b = geo.addPoint(radius, 0, 0), geo.addPoint(0, radius, 0)
+        ha, hb = geo.addPoint(radius * s, 0, radius * c), geo.addPoint(0, radius * s, radius * c)
+        equator = geo.addCircleArc(a, centre, b)
+        yz = geo.addCircleArc(b, centre, hb)
+        hole = geo.addCircleArc(hb, pole, ha)
+        xz = geo.addCircleArc(ha, centre, a)
+        loop = geo.addCurveLoop([equator, yz, hole, xz])
+        surf = geo.addSurfaceFilling([loop], sphereCenterTag=centre)
+        for curve in (equator, yz, hole, xz):
+            geo.mesh.setTransfiniteCurve(curve, n + 1)
+        geo.mesh.setTransfiniteSurface(surf)
+        if cell == "quadrilateral":
+            geo.mesh.setRecombine(2, surf)
+        geo.synchronize()
+        gmsh.model.addPhysicalGroup(2, [surf], 1)
+        tags = {"hole": 1, "equator": 2, "xz": 3, "yz": 4}
+        for name, curve in (("hole", hole), ("equator", equator), ("xz", xz), ("yz", yz)):
+            gmsh.model.addPhysicalGroup(1, [curve], tags[name])
+        return tags
+
+    return _gmsh_to_dolfinx(comm, build, order=order, cell=cell)
+
+
 def load_msh(path: str | Path, comm: MPI.Comm = MPI.COMM_WORLD) -> SurfaceMesh:
     """Load a gmsh ``.msh`` surface mesh in 3-D with physical groups.
 

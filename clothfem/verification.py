@@ -35,6 +35,7 @@ from .shell import (
     FabricMaterial,
     Gravity,
     PointForce,
+    PointPin,
     Prescribed,
     Pressure,
     Quadrature,
@@ -539,3 +540,47 @@ def _solve_small_load(model: ShellModel, *, prefix: str) -> int:
     if its != 1:
         raise RuntimeError(f"{prefix.rstrip('_')}: the linear step was not taken")
     return its
+
+
+# MacNeal & Harder (1985): hemisphere with an 18-degree hole, radial displacement at the
+# load points under unit loads on the quarter model (linear).
+HEMISPHERE_REFERENCE = 0.094
+
+
+def run_hemisphere(
+    *, n: int, comm: MPI.Comm = MPI.COMM_WORLD, quadrature: Quadrature | None = None
+) -> Result:
+    """Hemisphere with an 18-degree polar hole (MacNeal & Harder 1985; Sze et al. 2004
+    problem 3.4 in its linear range): R = 10, t = 0.04, E = 6.825e7, nu = 0.3; a quarter
+    model with ``n`` x ``n`` cells, symmetry on the two meridians, a unit force pulling
+    outwards at (R, 0, 0) and one pushing inwards at (0, R, 0); u_x at the first."""
+    t0 = time.perf_counter()
+    R = 10.0
+    sm = meshes.sphere_quarter(comm, radius=R, hole_angle=math.radians(18), n=n)
+    model = ShellModel(
+        sm,
+        material=FabricMaterial.isotropic(E=6.825e7, nu=0.3),
+        thickness=0.04,
+        loads=[
+            PointForce((R, 0.0, 0.0), (1.0, 0.0, 0.0)),
+            PointForce((0.0, R, 0.0), (0.0, -1.0, 0.0)),
+        ],
+        supports=[
+            Symmetry("xz", axis=1),
+            Symmetry("yz", axis=0),
+            PointPin(point=(R, 0.0, 0.0), components=(2,)),
+        ],
+        quadrature=quadrature or Quadrature(),
+    )
+    its = _solve_small_load(model, prefix="hemi_")
+    u = model.displacement_at((R, 0.0, 0.0))[0]
+    ref = HEMISPHERE_REFERENCE
+    return Result(
+        "hemisphere u_x (MacNeal-Harder)",
+        f"{n}x{n}",
+        u,
+        ref,
+        abs(u - ref) / ref,
+        time.perf_counter() - t0,
+        its,
+    )
