@@ -24,8 +24,8 @@ the run stops early.
 Resistance measures (every integrator): ``joint_work`` [J] is the cumulative work the measured
 joint (the torque segment's hinge) does against the garment, -int tau_seg . omega dt with
 tau_seg the torque of the contact forces on that segment about its joint
-(:func:`clothfem.report.joint_work`: trapezoid over the quasi-static increments and the
-Newmark steps, one impulse per explicit step); ``dissipation_total`` [J] is the contact
+(:func:`clothfem.report.joint_work`: trapezoid over the hinge angle of the quasi-static
+increments and of the Newmark steps, one impulse per explicit step); ``dissipation_total`` [J] is the contact
 layers' frictional dissipation and ``dissipation_material`` [J] the fabric's (0: the St.
 Venant-Kirchhoff fabric is elastic). The explicit rows also carry ``external_work`` (the
 work of gravity [J]) for the energy balance. :func:`clothfem.run.run_scene` adds the
@@ -701,14 +701,17 @@ def _run_dynamic(
         _snapshot(scene, model, out, comm, tag, contact.bodies)
 
     state = {"step": 0, "rows": 0, "cut": 0, "pen": 0.0, "newton": 0, "snap": 0}
-    state.update(work=0.0, power=0.0)  # the measured joint's work [J] and last power [W]
+    # the measured joint's work [J], hinge angle [rad] and segment torque about the hinge
+    # axis [N m] at the last step
+    state.update(work=0.0, theta=0.0, tau_axis=0.0)
     hinge_motion = _measured_hinge(motions, plan.k_torque)
     keep = None
     if resume:
         data = _load_checkpoint(out, comm)
         dc.restore_arrays(data)
         state.update({k: int(data[f"run_{k}"]) for k in ("step", "rows", "cut", "newton", "snap")})
-        state.update({k: float(data[f"run_{k}"]) for k in ("work", "power") if f"run_{k}" in data})
+        for k in ("work", "theta", "tau_axis"):
+            state[k] = float(data[f"run_{k}"]) if f"run_{k}" in data else 0.0
         state["pen"] = float(data["run_pen"])
         keep = state["rows"]
         rank0_print(f"  resumed from the checkpoint at t = {dc.t:.6g} s (step {state['step']})")
@@ -725,13 +728,17 @@ def _run_dynamic(
             cr = r.contact
             state["pen"] = max(state["pen"], cr.max_penetration)
             state["newton"] += cr.newton_iterations
-            if hinge_motion is not None:  # trapezoid rule of report.joint_work over the step
-                moving = r.time > t_settle
-                omega = hinge_motion.pose(r.time - t_settle).angular_velocity * moving
+            if hinge_motion is not None:
+                # the trapezoid rule of report.joint_work over the step's hinge angle (the
+                # segment torque is a state of the implicit step; over time it would miss
+                # half of the first step when the rate jumps at the start)
                 seg = _segment_torque(contact, model, plan.k_torque, hinge_motion.joint, comm)
-                power = float(joint_power(seg, omega))
-                state["work"] += 0.5 * (state["power"] + power) * r.dt
-                state["power"] = power
+                tau_axis = float(seg @ hinge_axis)
+                theta = hinge_motion.angle(max(r.time - t_settle, 0.0))
+                th = np.array([state["theta"], theta])
+                ta = np.array([state["tau_axis"], tau_axis])
+                state["work"] += float(joint_work(th, ta, 1.0)[-1])
+                state.update(theta=theta, tau_axis=tau_axis)
             tio = time.perf_counter()
             step = state["step"]
             if step % o["every"] == 0:
