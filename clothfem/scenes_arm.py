@@ -25,11 +25,12 @@ Resistance measures (every integrator): ``joint_work`` [J] is the cumulative wor
 joint (the torque segment's hinge) does against the garment, -int tau_seg . omega dt with
 tau_seg the torque of the contact forces on that segment about its joint
 (:func:`clothfem.report.joint_work`: trapezoid over the hinge angle of the quasi-static
-increments and of the Newmark steps, one impulse per explicit step); ``dissipation_total`` [J] is the contact
-layers' frictional dissipation and ``dissipation_material`` [J] the fabric's (0: the St.
-Venant-Kirchhoff fabric is elastic). The explicit rows also carry ``external_work`` (the
-work of gravity [J]) for the energy balance. :func:`clothfem.run.run_scene` adds the
-per-phase torque statistics to ``summary.json`` (:func:`clothfem.report.resistance_measures`).
+increments and of the Newmark steps, one impulse per explicit step);
+``dissipation_total`` [J] is the contact layers' frictional dissipation and
+``dissipation_material`` [J] the fabric's (0: the St. Venant-Kirchhoff fabric is elastic).
+The explicit rows also carry ``external_work`` (the work of gravity [J]) for the energy
+balance. :func:`clothfem.run.run_scene` adds the per-phase torque statistics to
+``summary.json`` (:func:`clothfem.report.resistance_measures`).
 """
 
 from __future__ import annotations
