@@ -23,9 +23,10 @@ from mpi4py import MPI
 from . import mesh as meshes
 from .io import ResultWriter, rank0_print, snapshot_png
 from .petsc_options import describe_direct_lu
-from .scene import SceneError
+from .scene import DECRIMPING_KEYS, SceneError
 from .shell import (
     Clamp,
+    DecrimpingFabric,
     EdgeMoment,
     EdgeTraction,
     FabricMaterial,
@@ -40,7 +41,7 @@ from .shell import (
 )
 from .static import LoadStepping, solve_static
 
-__all__ = ["build_mesh", "build_model", "run_scene", "RunStopped"]
+__all__ = ["build_mesh", "build_material", "build_model", "run_scene", "RunStopped"]
 
 
 class RunStopped(RuntimeError):
@@ -120,15 +121,36 @@ def _loads(scene):
     return out
 
 
+def build_material(mat: dict[str, Any]) -> FabricMaterial:
+    """The material of a validated scene's ``[material]`` table."""
+    common = dict(E1=mat["E1"], E2=mat["E2"], G12=mat["G12"], nu12=mat["nu12"], rho=mat["rho"])
+    if mat["law"] == "decrimping":
+        return DecrimpingFabric(**common, **{k: mat[k] for k in DECRIMPING_KEYS})
+    return FabricMaterial(**common)
+
+
+def _material_line(mat: dict[str, Any]) -> str:
+    line = (
+        f"E1 {mat['E1']:.4g} Pa, E2 {mat['E2']:.4g} Pa, G12 {mat['G12']:.4g} Pa, "
+        f"nu12 {mat['nu12']:g}, rho {mat['rho']:g} kg/m^3, t {mat['thickness']:g} m"
+    )
+    if mat["law"] == "decrimping":
+        line = (
+            f"decrimping, crimped {line}; de-crimped E1 {mat['E1_decrimped']:.4g} Pa, "
+            f"E2 {mat['E2_decrimped']:.4g} Pa above yarn strains "
+            f"{mat['transition1'] + mat['width1']:.4g} / {mat['transition2'] + mat['width2']:.4g}"
+            " (the explicit stable step shrinks as the yarns de-crimp: solver.recheck_every)"
+        )
+    return line
+
+
 def build_model(
     scene: dict[str, Any], comm: MPI.Comm = MPI.COMM_WORLD
 ) -> tuple[ShellModel, list[str]]:
     """The shell model of a scene and a log of what was built and left out."""
     sm = build_mesh(scene, comm)
     mat = scene["material"]
-    material = FabricMaterial(
-        E1=mat["E1"], E2=mat["E2"], G12=mat["G12"], nu12=mat["nu12"], rho=mat["rho"]
-    )
+    material = build_material(mat)
     model = ShellModel(
         sm,
         material=material,
@@ -150,8 +172,7 @@ def build_model(
         f"mesh: {scene['mesh']['generator']}, {n_cells} {scene['mesh']['cell']} cells "
         f"(order {scene['mesh']['order']}, u and theta of degree {scene['element']['degree']}), "
         f"{n_nodes} nodes, {5 * n_nodes} unknowns (u: 3, theta: 2 per node), {comm.size} rank(s)",
-        f"material: E1 {mat['E1']:.4g} Pa, E2 {mat['E2']:.4g} Pa, G12 {mat['G12']:.4g} Pa, "
-        f"nu12 {mat['nu12']:g}, rho {mat['rho']:g} kg/m^3, t {mat['thickness']:g} m",
+        f"material: {_material_line(mat)}",
         "supports: "
         + (", ".join(f"{s['type']} on {s['where']}" for s in scene["supports"]) or "none"),
         "loads: " + (", ".join(ld["type"] for ld in scene["loads"]) or "none"),

@@ -67,12 +67,39 @@ class Section:
 
 POS = dict(lo=0.0, open_lo=True)
 
+
+def _decrimping(E_c: float, E_d: float, below: float, above: float) -> dict[str, float]:
+    """Keys of a decrimping law exactly crimped below the yarn stress ``below`` and exactly
+    de-crimped above ``above`` [Pa] (clothfem.shell.material.transition_from_stresses)."""
+    width = (above - below) / (E_c + E_d)
+    et = below / E_c + width
+    return dict(
+        E1_decrimped=E_d,
+        E2_decrimped=E_d,
+        transition1=et,
+        transition2=et,
+        width1=width,
+        width2=width,
+    )
+
+
 MATERIALS = {
     # Man & Swan (2007) Sec. 4.1.5; G = E / 200 for sets II and III, 0.1 MPa for set I.
     "crimped-cotton": dict(E1=1.2e6, E2=1.2e6, G12=1.0e5, rho=436.0),
     "decrimped-cotton": dict(E1=350e6, E2=350e6, G12=350e6 / 200, rho=436.0),
     "kevlar": dict(E1=7.2e9, E2=7.2e9, G12=7.2e9 / 200, rho=700.0),
+    # the two cotton sets as the limits of one material: 1.2 MPa while the yarn stress is
+    # below 1 MPa, 350 MPa above 10 MPa (Sec. 4.1.5), G12 as crimped-cotton (docs/material.md)
+    "decrimping-cotton": dict(
+        law="decrimping",
+        E1=1.2e6,
+        E2=1.2e6,
+        G12=1.0e5,
+        rho=436.0,
+        **_decrimping(1.2e6, 350e6, 1.0e6, 10.0e6),
+    ),
 }
+DECRIMPING_KEYS = ("E1_decrimped", "E2_decrimped", "transition1", "transition2", "width1", "width2")
 
 SCHEMA: dict[str, Section] = {
     "scene": Section(
@@ -124,17 +151,35 @@ SCHEMA: dict[str, Section] = {
                 default=None,
                 choices=tuple(MATERIALS),
             ),
-            "E1": Key("float", "warp Young's modulus [Pa]", **POS),
-            "E2": Key("float", "weft Young's modulus [Pa]", **POS),
+            "law": Key(
+                "choice",
+                "stress-strain law: 'linear' (St. Venant-Kirchhoff) or 'decrimping' (E1, E2 "
+                "while crimped, stiffening smoothly to E1_decrimped, E2_decrimped over yarn "
+                "strains transition +- width; docs/material.md)",
+                default="linear",
+                choices=("linear", "decrimping"),
+            ),
+            "E1": Key("float", "warp Young's modulus [Pa] (decrimping: crimped)", **POS),
+            "E2": Key("float", "weft Young's modulus [Pa] (decrimping: crimped)", **POS),
             "G12": Key("float", "in-plane shear modulus [Pa]", **POS),
             "nu12": Key("float", "major Poisson ratio [-], |nu12| < sqrt(E1/E2)", default=0.0),
             "rho": Key("float", "mass density [kg/m^3]", default=0.0, lo=0.0),
+            "E1_decrimped": Key("float", "decrimping: de-crimped warp modulus [Pa], >= E1", **POS),
+            "E2_decrimped": Key("float", "decrimping: de-crimped weft modulus [Pa], >= E2", **POS),
+            "transition1": Key(
+                "float", "decrimping: warp Green strain at the middle of the transition", **POS
+            ),
+            "transition2": Key(
+                "float", "decrimping: weft Green strain at the middle of the transition", **POS
+            ),
+            "width1": Key("float", "decrimping: warp transition half-width, <= transition1", **POS),
+            "width2": Key("float", "decrimping: weft transition half-width, <= transition2", **POS),
             "thickness": Key("float", "fabric thickness [m]", required=True, **POS),
             "warp": Key(
                 "vec3", "global direction projected on the surface as warp", default=[1.0, 0.0, 0.0]
             ),
         },
-        "the fabric material (orthotropic St. Venant-Kirchhoff, plane stress)",
+        "the fabric material (orthotropic, plane stress; St. Venant-Kirchhoff or decrimping)",
     ),
     "supports": Section(
         {
@@ -543,6 +588,7 @@ def validate(data: dict[str, Any]) -> dict[str, Any]:
     limit = math.sqrt(mat["E1"] / mat["E2"])
     if not abs(mat["nu12"]) < limit:
         _fail("material.nu12", f"must be in (-{limit:.4g}, {limit:.4g}), got {mat['nu12']!r}")
+    _validate_decrimping(data["material"], mat)
     if out["mesh"]["generator"] == "cylinder" and out["mesh"]["n_around"] % 4:
         _fail(
             "mesh.n_around",
@@ -553,6 +599,32 @@ def validate(data: dict[str, Any]) -> dict[str, Any]:
         _fail("element.stabilization", "is a parameter of element.scheme = 'sri' only")
     _validate_body(data, out)
     return out
+
+
+def _validate_decrimping(given: dict[str, Any], mat: dict[str, Any]) -> None:
+    """The decrimping keys: all of them with law 'decrimping' (from the preset or given),
+    none given with law 'linear'."""
+    if mat["law"] == "linear":
+        for k in DECRIMPING_KEYS:
+            if k in given:
+                _fail(f"material.{k}", "is a parameter of material.law = 'decrimping' only")
+            mat[k] = None
+        return
+    for k in DECRIMPING_KEYS:
+        if mat[k] is None:
+            _fail(f"material.{k}", "required with material.law = 'decrimping'")
+    for i in (1, 2):
+        if mat[f"E{i}_decrimped"] < mat[f"E{i}"]:
+            _fail(
+                f"material.E{i}_decrimped",
+                f"must be >= E{i} = {mat[f'E{i}']:g}, got {mat[f'E{i}_decrimped']!r}",
+            )
+        if mat[f"width{i}"] > mat[f"transition{i}"]:
+            _fail(
+                f"material.width{i}",
+                f"must be in (0, transition{i} = {mat[f'transition{i}']:g}], "
+                f"got {mat[f'width{i}']!r}",
+            )
 
 
 def _validate_body(data: dict[str, Any], out: dict[str, Any]) -> None:

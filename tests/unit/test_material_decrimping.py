@@ -242,3 +242,41 @@ def test_bad_input_one_line_errors():
         )
     with pytest.raises(ValueError, match="direction must be 1 or 2"):
         MAT.uniaxial_stress(0.1, direction=3)
+
+
+SCENE = {
+    "scene": {"name": "decrimp"},
+    "mesh": {"generator": "strip", "length": 1.0, "width": 0.2, "nx": 2, "ny": 1},
+    "material": {"preset": "decrimping-cotton", "thickness": 1e-3},
+}
+
+
+def test_scene_preset_builds_the_cotton_law():
+    """Scene preset 'decrimping-cotton' gives DecrimpingFabric.cotton(); explicit keys
+    override it; the decrimping keys are refused with law 'linear' and required with
+    'decrimping'; the runner's model reproduces the closed-form energy of a stretch into
+    the de-crimped range."""
+    from clothfem import scene as scenes
+    from clothfem.run import build_material, build_model
+
+    s = scenes.validate(scenes.apply_overrides(SCENE, []))
+    assert build_material(s["material"]) == DecrimpingFabric.cotton()
+    s = scenes.validate(scenes.apply_overrides(SCENE, ["material.E2_decrimped=2e8"]))
+    assert build_material(s["material"]).E2_decrimped == 2e8
+    lin = scenes.validate(scenes.apply_overrides(SCENE, ["material.law='linear'"]))
+    assert type(build_material(lin["material"])) is FabricMaterial
+    bad = [
+        (["material.preset='crimped-cotton'", "material.width1=0.1"], "only"),
+        (["material.preset='crimped-cotton'", "material.law='decrimping'"], "required with"),
+        (["material.E1_decrimped=1e5"], r"must be >= E1 = 1.2e\+06"),
+        (["material.width2=0.9"], r"must be in \(0, transition2 = 0.8589"),
+    ]
+    for sets, msg in bad:
+        with pytest.raises(scenes.SceneError, match=msg):
+            scenes.validate(scenes.apply_overrides(SCENE, sets))
+    model, log = build_model(scenes.validate(scenes.apply_overrides(SCENE, [])), COMM)
+    assert any("decrimping, crimped E1 1.2e+06" in line for line in log)
+    e = 1.0
+    _homogeneous(model, np.diag([math.sqrt(1 + 2 * e), 1.0]))
+    want = 1e-3 * 0.2 * DecrimpingFabric.cotton().energy_density(e, 0.0)
+    assert model.strain_energy() == pytest.approx(want, rel=1e-10)
