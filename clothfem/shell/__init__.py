@@ -12,11 +12,13 @@ from .conditions import (
     Pressure,
     Symmetry,
 )
+from .hysteresis import DahlFriction
 from .material import DecrimpingFabric, FabricMaterial
 from .model import Quadrature, ShellModel
 
 __all__ = [
     "Clamp",
+    "DahlFriction",
     "DecrimpingFabric",
     "EdgeMoment",
     "EdgeTraction",

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 import ufl
 
+from .hysteresis import DahlFriction
+
 __all__ = [
     "FabricMaterial",
     "DecrimpingFabric",
@@ -54,6 +56,8 @@ class FabricMaterial:
     rho: mass density [kg/m^3] (0 for a massless static analysis).
     G13, G23: transverse shear moduli [Pa]; default G12.
     shear_factor: transverse shear correction factor k [-], default 5/6.
+    friction: yarn friction in parallel with the elastic law (load-unload hysteresis,
+        :mod:`clothfem.shell.hysteresis`); None: elastic.
     """
 
     E1: float
@@ -64,8 +68,13 @@ class FabricMaterial:
     G13: float | None = None
     G23: float | None = None
     shear_factor: float = 5.0 / 6.0
+    friction: DahlFriction | None = None
 
     def __post_init__(self) -> None:
+        if self.friction is not None and not isinstance(self.friction, DahlFriction):
+            raise ValueError(
+                f"material friction must be a DahlFriction or None, got {self.friction!r}"
+            )
         for name in ("E1", "E2", "G12"):
             _check_positive(name, getattr(self, name), "Pa")
         for name in ("G13", "G23"):

@@ -46,6 +46,7 @@ from .conditions import (
     Pressure,
     Symmetry,
 )
+from .hysteresis import YarnFriction
 from .kinematics import lamina_frame, shell_strains
 from .material import (
     DecrimpingFabric,
@@ -359,6 +360,12 @@ class ShellModel:
             self.alpha = None
             membrane = _blend(psi_m, dx_r, dx_f, quadrature.stabilization)
             shear = psi_s * dx_r
+        self.friction = None
+        if mat.friction is not None:  # yarn friction, history at the reduced rule's points
+            self.friction = YarnFriction(
+                mesh, mat.friction, eps, self.t, degree=quadrature.reduced, dx=dx_r
+            )
+            membrane = membrane + self.friction.energy
         self._energy_terms = {
             "membrane": membrane,
             "bending": bending_energy(kappa, self.Q, self.t) * dx_f,
