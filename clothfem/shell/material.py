@@ -245,10 +245,12 @@ class DecrimpingFabric(FabricMaterial):
         crimped_below: float = 1.0e6,
         decrimped_above: float = 10.0e6,
         rho: float = 436.0,
+        friction: DahlFriction | None = None,
     ) -> DecrimpingFabric:
         """Man & Swan's plain-weave cotton (Sec. 4.1.5) as one material: E = 1.2 MPa while
         crimped (yarn stress below ``crimped_below`` = 1 MPa), 350 MPa de-crimped (above
-        ``decrimped_above`` = 10 MPa), G12 = 0.1 MPa, nu12 = 0, both yarn directions alike."""
+        ``decrimped_above`` = 10 MPa), G12 = 0.1 MPa, nu12 = 0, both yarn directions alike;
+        ``friction`` e.g. :data:`clothfem.shell.hysteresis.COTTON_FRICTION`."""
         Ec, Ed = 1.2e6, 350e6
         et, w = transition_from_stresses(
             E_crimped=Ec,
@@ -267,6 +269,7 @@ class DecrimpingFabric(FabricMaterial):
             transition2=et,
             width1=w,
             width2=w,
+            friction=friction,
         )
 
     def yarn_parameters(self) -> np.ndarray:

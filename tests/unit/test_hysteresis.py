@@ -251,3 +251,41 @@ def test_explicit_vibration_dissipates_by_friction():
     D = model.friction.dissipated()
     assert D > 0.5 * K0 and fr[-1].kinetic < 0.1 * K0
     assert fr[-1].dissipation + steps[-1] == pytest.approx(D, rel=1e-3)
+
+
+def test_cotton_friction_preset_loop():
+    """COTTON_FRICTION with the crimped cotton (E = 1.2 MPa): a tensile cycle 0 -> e_max ->
+    zero stress recovers 58 % of the loading work and leaves 1.4 % (e_max = 5 %) and 2.3 %
+    (10 %) residual strain, as its comment states; the band is 2 S = 60 kPa wide at large
+    amplitude (closed-form steady loop of a large cycle: height -> 2 S)."""
+    from clothfem.shell.hysteresis import COTTON_FRICTION
+
+    E = 1.2e6
+    k, Sf = COTTON_FRICTION.stiffness1, COTTON_FRICTION.stress1
+    for e_max, rt, residual in ((0.05, 0.58, 0.014), (0.1, 0.58, 0.023)):
+        n = 4000
+        de = e_max / n
+        s, w_load = 0.0, 0.0
+        for i in range(n):
+            s1, w, _ = dahl_update(de, s, k=k, S=Sf)
+            w_load += float(w) + E * ((i + 1) ** 2 - i**2) * de**2 / 2
+            s = float(s1)
+        e, w_back = e_max, 0.0
+        while True:
+            s1, w, _ = dahl_update(-de, s, k=k, S=Sf)
+            if E * (e - de) + float(s1) < 0:
+                break
+            w_back += -(float(w) + E * ((e - de) ** 2 - e**2) / 2)
+            e, s = e - de, float(s1)
+        assert w_back / w_load == pytest.approx(rt, abs=0.01)
+        assert e == pytest.approx(residual, abs=0.001)
+    # a cycle of amplitude 0.5 about any mean strain, from its lower turning point: the
+    # gap between the loading and unloading branches at the mean strain is 2 S to 1e-7
+    A = 0.5
+    q = math.exp(-2 * k * A / Sf)
+    s_bottom = -Sf * (1 - q) / (1 + q)
+    s_up = float(dahl_update(A, s_bottom, k=k, S=Sf)[0])
+    s_top = float(dahl_update(A, s_up, k=k, S=Sf)[0])
+    s_down = float(dahl_update(-A, s_top, k=k, S=Sf)[0])
+    assert s_top == pytest.approx(-s_bottom, rel=1e-12)
+    assert s_up - s_down == pytest.approx(2 * Sf, rel=1e-7)
