@@ -325,6 +325,8 @@ class LagrangeContact:
         self._K: PETSc.Mat | None = None
         self._kkt: BorderedMatrix | None = None
         self._kkt_slots = np.zeros(0, dtype=np.intp)  # pairs with a multiplier row in _kkt
+        # (slots, bc rows) of a checkpoint's bordered matrix, rebuilt by the next _kkt_matrix
+        self._kkt_restored: tuple[NDArray[np.intp], NDArray[np.int32]] | None = None
         # cumulative wall time [s] by part: fabric residual/tangent assembly, the contact layer
         # (projections, friction, bordered matrix), the linear solve
         self.timers = {"assembly": 0.0, "contact": 0.0, "solve": 0.0}
@@ -338,6 +340,13 @@ class LagrangeContact:
             "lam": self._lam.copy(),
             "last_friction": self._last_friction_pairs.copy(),
             "counters": np.array([self.step_count, self.dissipation_total]),
+            # the bordered matrix's multiplier slots (they outlive the pairs that left the
+            # set): a resumed run factors the same matrix, so it repeats bit for bit
+            "kkt_slots": self._kkt_slots.copy(),
+            "kkt_bc_rows": (
+                self._kkt.bc_rows.copy() if self._kkt is not None else np.zeros(0, np.int32)
+            ),
+            "kkt_built": np.array(self._kkt is not None),
         }
         for k, (c, Q, r) in enumerate(self.bodies):
             out[f"body{k}"] = np.concatenate([c, Q.ravel(), r])
@@ -356,6 +365,8 @@ class LagrangeContact:
         pair_node = np.arange(self.n * self.nb) // self.nb
         np.add.at(self._last_friction, pair_node, data["last_friction"])
         self.step_count, self.dissipation_total = int(data["counters"][0]), data["counters"][1]
+        if "kkt_slots" in data and bool(data["kkt_built"]):
+            self._kkt_restored = (data["kkt_slots"].astype(np.intp), data["kkt_bc_rows"])
         for k in range(len(self.bodies)):
             b = data[f"body{k}"]
             self.set_pose(k, centre=b[:3], axes=b[3:12].reshape(3, 3), radii=b[12:])
@@ -495,21 +506,28 @@ class LagrangeContact:
         while they contain the active pairs and are not more than twice as many (+ 16); a
         new pattern takes the union with the old slots, so pairs that come and go between
         Newton passes keep their slot (and the LU its analysis). Collective."""
-        kkt = self._kkt
-        slots = self._kkt_slots
+        kkt, slots, restored = self._kkt, self._kkt_slots, self._kkt_restored
+        self._kkt_restored = None
+        prev_bc = kkt.bc_rows if kkt is not None else None
+        if kkt is None and restored is not None:  # a checkpoint's slots (restore_arrays)
+            slots, prev_bc = restored
         fits = (
-            kkt is not None
-            and np.array_equal(kkt.bc_rows, bc_rows)
+            prev_bc is not None
+            and np.array_equal(prev_bc, bc_rows)
             and len(slots) <= 2 * len(pairs) + 16
             and bool(np.isin(pairs, slots).all())
         )
         if not self.comm.allreduce(fits, op=MPI.LAND):
-            if kkt is not None:
-                kkt.destroy()
+            if prev_bc is not None:
+                if kkt is not None:
+                    kkt.destroy()
                 union = np.union1d(slots, pairs)
                 slots = union if len(union) <= 2 * len(pairs) + 16 else pairs.copy()
             else:
                 slots = pairs.copy()
+            kkt = self._kkt = BorderedMatrix(self._K, slots // self.nb, bc_rows)
+            self._kkt_slots = slots
+        elif kkt is None:  # the checkpoint's slots fit: the matrix the run had
             kkt = self._kkt = BorderedMatrix(self._K, slots // self.nb, bc_rows)
             self._kkt_slots = slots
         where = np.searchsorted(slots, pairs)
