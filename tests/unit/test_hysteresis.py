@@ -10,7 +10,7 @@ import pytest
 from mpi4py import MPI
 
 from clothfem import mesh as meshes
-from clothfem.shell import FabricMaterial, PointPin, Prescribed, ShellModel
+from clothfem.shell import DecrimpingFabric, FabricMaterial, PointPin, Prescribed, ShellModel
 from clothfem.shell.hysteresis import DahlFriction, dahl_cycle_area, dahl_update
 from clothfem.static import NewtonSolver
 
@@ -118,15 +118,20 @@ def test_strip_cycle_dissipation_equals_loop_area(amplitude):
     assert model.strain_energy() == pytest.approx(stored, rel=1e-9)
 
 
-def _material(**kw):
-    return FabricMaterial(
-        E1=1.0e6,
-        E2=0.6e6,
-        G12=0.2e6,
-        nu12=0.3,
-        rho=500.0,
-        friction=DahlFriction(stiffness1=K, stiffness2=0.5 * K, stress1=S, stress2=2 * S),
-        **kw,
+def _material(decrimping: bool):
+    friction = DahlFriction(stiffness1=K, stiffness2=0.5 * K, stress1=S, stress2=2 * S)
+    common = dict(E1=1.0e6, E2=0.6e6, G12=0.2e6, nu12=0.3, rho=500.0, friction=friction)
+    if not decrimping:
+        return FabricMaterial(**common)
+    # transitions that the random test states cross (as in test_material_decrimping)
+    return DecrimpingFabric(
+        **common,
+        E1_decrimped=50e6,
+        E2_decrimped=20e6,
+        transition1=0.02,
+        transition2=0.03,
+        width1=0.015,
+        width2=0.02,
     )
 
 
@@ -141,13 +146,13 @@ def _orders(errors):
     return [math.log2(errors[i] / errors[i + 1]) for i in range(len(errors) - 1)]
 
 
-@pytest.fixture(scope="module")
-def panel_model():
+@pytest.fixture(scope="module", params=[False, True], ids=["linear", "decrimping"])
+def panel_model(request):
     """A curved panel with yarn friction whose history was committed at a random state."""
     sm = meshes.cylinder_panel(
         COMM, radius=1.0, length=1.5, angle=math.radians(50), n_around=4, n_along=3
     )
-    model = ShellModel(sm, material=_material(), thickness=0.01, warp=(1.0, 0.3, 0.0))
+    model = ShellModel(sm, material=_material(request.param), thickness=0.01, warp=(1.0, 0.3, 0.0))
     model.set_state(_random_state(model, 0.05, 7))
     model.friction.commit()
     assert model.friction.stored() > 0
