@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import dolfinx
 import numpy as np
 import ufl
 from dolfinx import fem
@@ -109,7 +110,9 @@ def dahl_cycle_area(amplitude: float, *, k: float, S: float) -> float:
     return 2.0 * (2.0 * amplitude * S - (s_star + S) * (S / k) * (1.0 - q))
 
 
-def dahl_increment_energy(d, s, k, S) -> ufl.core.expr.Expr:
+def dahl_increment_energy(
+    d: ufl.core.expr.Expr, s: ufl.core.expr.Expr, k: ufl.core.expr.Expr, S: ufl.core.expr.Expr
+) -> ufl.core.expr.Expr:
     """phi(d) = int_0^d s dE of the Dahl law from stress ``s`` (UFL), by branch so that
     phi'(0) = s (the loading branch at d = 0)."""
     up = S * d + (s - S) * (S / k) * (1.0 - ufl.exp(-k * d / S))
@@ -132,7 +135,16 @@ class YarnFriction:
     its element comparison calls numpy.allclose on point arrays of different shapes.)
     """
 
-    def __init__(self, mesh, friction: DahlFriction, eps, t, *, degree: int, dx):
+    def __init__(
+        self,
+        mesh: dolfinx.mesh.Mesh,
+        friction: DahlFriction,
+        eps: ufl.core.expr.Expr,
+        t: fem.Constant,
+        *,
+        degree: int,
+        dx: ufl.Measure,
+    ) -> None:
         self.mesh, self.friction, self.t = mesh, friction, t
         self.k = fem.Constant(mesh, friction.parameters())
         cell = mesh.ufl_cell()

@@ -282,7 +282,9 @@ class DecrimpingFabric(FabricMaterial):
             ]
         )
 
-    def stress(self, E11: np.ndarray, E22: np.ndarray, E12: np.ndarray | float = 0.0) -> tuple:
+    def stress(
+        self, E11: np.ndarray, E22: np.ndarray, E12: np.ndarray | float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closed form: second Piola-Kirchhoff (S11, S22, S12) [Pa] at the in-plane Green
         strains (NumPy arrays broadcast together)."""
         E11, E22, E12 = (np.asarray(a, dtype=float) for a in (E11, E22, E12))
@@ -313,7 +315,9 @@ class DecrimpingFabric(FabricMaterial):
         Ec = self.E1 if direction == 1 else self.E2
         return Ec + dE * yarn_ramp((e - et) / w)[2]
 
-    def energy_density(self, E11, E22, E12=0.0) -> np.ndarray:
+    def energy_density(
+        self, E11: np.ndarray, E22: np.ndarray, E12: np.ndarray | float = 0.0
+    ) -> np.ndarray:
         """Closed form: W [J/m^3] at the in-plane Green strains (NumPy)."""
         E11, E22, E12 = (np.asarray(a, dtype=float) for a in (E11, E22, E12))
         Q = self.plane_stress_stiffness()
@@ -325,7 +329,9 @@ class DecrimpingFabric(FabricMaterial):
         return W
 
 
-def decrimping_membrane_energy(eps, Q, yarn, t) -> ufl.core.expr.Expr:
+def decrimping_membrane_energy(
+    eps: ufl.core.expr.Expr, Q: ufl.core.expr.Expr, yarn: ufl.core.expr.Expr, t
+) -> ufl.core.expr.Expr:
     """t W(eps) of :class:`DecrimpingFabric` per unit reference area [J/m^2]; ``yarn`` the
     2x3 constants of :meth:`DecrimpingFabric.yarn_parameters`."""
     psi = membrane_energy(eps, Q, t)
