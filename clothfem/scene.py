@@ -89,7 +89,7 @@ MATERIALS = {
     "decrimped-cotton": dict(E1=350e6, E2=350e6, G12=350e6 / 200, rho=436.0),
     "kevlar": dict(E1=7.2e9, E2=7.2e9, G12=7.2e9 / 200, rho=700.0),
     # the two cotton sets as the limits of one material: 1.2 MPa while the yarn stress is
-    # below 1 MPa, 350 MPa above 10 MPa (Sec. 4.1.5), G12 as crimped-cotton (docs/material.md)
+    # below 1 MPa, 350 MPa above 10 MPa (Sec. 4.1), G12 as crimped-cotton (docs/material.md)
     "decrimping-cotton": dict(
         law="decrimping",
         E1=1.2e6,

@@ -1,7 +1,7 @@
 """Yarn friction: a rate-independent Dahl element per yarn direction (load-unload loops).
 
 Woven fabrics dissipate energy in a load-unload cycle through friction between and within
-yarns (Man & Swan 2007, Sec. 2.4 and Fig. 2; KES-F curves, Kawabata 1980). Here each yarn
+yarns (Man & Swan 2007, Sec. 3.1.2 and Fig. 2; KES-F curves, Kawabata 1980). Here each yarn
 direction i carries, in parallel with the elastic law (:class:`FabricMaterial` or
 :class:`DecrimpingFabric`), a friction stress s_i obeying Dahl's rate-independent law
 

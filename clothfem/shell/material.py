@@ -247,7 +247,7 @@ class DecrimpingFabric(FabricMaterial):
         rho: float = 436.0,
         friction: DahlFriction | None = None,
     ) -> DecrimpingFabric:
-        """Man & Swan's plain-weave cotton (Sec. 4.1.5) as one material: E = 1.2 MPa while
+        """Man & Swan's plain-weave cotton (Sec. 4.1) as one material: E = 1.2 MPa while
         crimped (yarn stress below ``crimped_below`` = 1 MPa), 350 MPa de-crimped (above
         ``decrimped_above`` = 10 MPa), G12 = 0.1 MPa, nu12 = 0, both yarn directions alike;
         ``friction`` e.g. :data:`clothfem.shell.hysteresis.COTTON_FRICTION`."""

@@ -76,7 +76,7 @@ def test_yarn_energy_is_convex():
 
 
 def test_cotton_preset_matches_the_paper():
-    """Man & Swan Sec. 4.1.5: E = 1.2 MPa while the stress is below 1 MPa, 350 MPa above
+    """Man & Swan Sec. 4.1: E = 1.2 MPa while the stress is below 1 MPa, 350 MPa above
     10 MPa; G12 0.1 MPa, rho 436 kg/m^3; in between the tangent rises monotonically."""
     m = DecrimpingFabric.cotton()
     assert (m.E1, m.E2, m.E1_decrimped, m.G12, m.rho) == (1.2e6, 1.2e6, 350e6, 1e5, 436.0)
