@@ -194,6 +194,28 @@ class YarnFriction:
         self.last_min_dissipation = self.mesh.comm.allreduce(lowest, op=MPI.MIN)
         return self.dissipated() - before
 
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """The history and the cumulated dissipation (local arrays, for a checkpoint)."""
+        return {
+            "friction_history": self.history.x.array.copy(),
+            "friction_dissipation": self.dissipation.x.array.copy(),
+        }
+
+    def restore_arrays(self, data: dict[str, np.ndarray]) -> None:
+        """Restore :meth:`state_arrays` of the same model and partition, before the model
+        assembles at a new state (it caches its residual by state, e.g. restore on the
+        freshly built model of a resumed run)."""
+        for name, f in (
+            ("friction_history", self.history),
+            ("friction_dissipation", self.dissipation),
+        ):
+            if data[name].shape != f.x.array.shape:
+                raise ValueError(
+                    f"{name} must have shape {f.x.array.shape} (same model and partition), "
+                    f"got {data[name].shape}"
+                )
+            f.x.array[:] = data[name]
+
     def dissipated(self) -> float:
         """Energy [J] dissipated by yarn friction since the start (collective)."""
         return self.mesh.comm.allreduce(fem.assemble_scalar(self._dissipated_form), op=MPI.SUM)

@@ -200,6 +200,27 @@ def test_jacobian_taylor_with_history(panel_model):
     assert min(_orders(errs)) > 1.9
 
 
+def test_checkpoint_arrays_restore_the_history(panel_model):
+    """state_arrays / restore_arrays give back the forces and the totals of a committed
+    history after further commits; a wrong shape is a one-line error."""
+    model = panel_model
+    model.set_load_factor(0.0)
+    saved = model.friction.state_arrays()
+    x = _random_state(model, 0.05, 11)
+    f0, f1 = x.duplicate(), x.duplicate()
+    model.residual(x, f0)
+    totals = (model.friction.dissipated(), model.friction.stored())
+    model.set_state(x)
+    model.friction.commit()
+    model.friction.restore_arrays(saved)
+    model.residual(_random_state(model, 0.05, 12), f1)  # (the model caches R by state)
+    model.residual(x, f1)
+    assert (f1 - f0).norm() == 0.0
+    assert (model.friction.dissipated(), model.friction.stored()) == totals
+    with pytest.raises(ValueError, match="friction_history must have shape"):
+        model.friction.restore_arrays({**saved, "friction_history": np.zeros(3)})
+
+
 def test_bad_input_one_line_errors():
     with pytest.raises(ValueError, match=r"friction stress2 must be a finite number > 0 Pa"):
         DahlFriction(stiffness1=1.0, stiffness2=1.0, stress1=1.0, stress2=0.0)
