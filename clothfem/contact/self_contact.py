@@ -1,0 +1,948 @@
+"""Fabric self-contact for the explicit integrator: proximity corrections consistent with FILM
+plus a continuous-collision fail-safe (pure NumPy and SciPy; the MPI wrapper at the end).
+
+Pipeline (each stage a small function on whole arrays):
+
+surface (8 triangles per 9-node cell) -> candidate list (cKDTree broad phase, kept while no
+node moved more than half the skin) -> point-triangle gaps and side-aware normals -> position
+projection (mass-weighted, Eq. 25 per pair) -> inelastic normal impulses -> Coulomb friction
+impulses -> continuous crossing check over the step (point-triangle and edge-edge) -> impact
+zones -> diagnostics.
+
+Conventions:
+
+* ``distance`` ``d`` [m]: the contact distance between mid-surfaces (the fabric thickness, or
+  a stated multiple); a pair is admissible when ``gap >= d``.
+* A pair is a node ``p`` against a triangle ``(a, b, c)`` with barycentric weights ``w`` of
+  the closest point ``q = w0 a + w1 b + w2 c``: coefficients ``(1, -w0, -w1, -w2)`` on the
+  nodes ``(p, a, b, c)``, normal ``n`` pointing from the triangle to the node, ``gap = (p -
+  q) . n``. A normal impulse ``J >= 0`` [N s] changes node ``k``'s velocity by ``coef_k J n /
+  m_k``; the coefficients sum to zero, so every correction is an internal impulse (linear
+  momentum is conserved to round-off).
+* Nodes with prescribed displacements have zero inverse mass (they are never corrected).
+
+FILM consistency (:mod:`clothfem.contact.explicit`): positions are projected onto the
+admissible set (``gap = d``) with the lumped masses (``lambda = m_eff (d - gap*) / dt^2``,
+Eq. 25 for one pair), the relative normal velocity of a pair in contact is brought to zero
+(non-resilient impact), and the tangential relative velocity is reduced by at most ``mu``
+times the normal impulse; the friction velocity change also moves the positions (``dx = dt
+dv_t``), so sticking layers do not creep.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+__all__ = [
+    "CandidateList",
+    "FabricSurface",
+    "PairContacts",
+    "SelfContact",
+    "SelfContactParameters",
+    "SelfContactRecord",
+    "SelfContactResult",
+    "build_candidates",
+    "closest_point_triangle",
+    "edge_contacts",
+    "edge_edge_crossings",
+    "fabric_surface",
+    "global_cells",
+    "mesh_nodes",
+    "friction_impulses",
+    "near_pairs",
+    "normal_impulses",
+    "pair_contacts",
+    "point_triangle_crossings",
+    "project_positions",
+    "segment_closest",
+    "segment_distance",
+    "self_contact_step",
+    "triangulate_q9",
+]
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+# boundary nodes of a dolfinx 9-node quadrilateral (basix Q2 order: vertices (0,0), (1,0),
+# (0,1), (1,1), mid-edges (.5,0), (0,.5), (1,.5), (.5,1), centre) counter-clockwise
+Q9_RING = np.array([0, 4, 1, 6, 3, 7, 2, 5])
+Q9_CENTRE = 8
+_FACE_EPS = 1e-9  # barycentric weight above which the closest point is inside the face
+
+
+# --------------------------------------------------------------------------- surface
+def triangulate_q9(cells: ArrayLike) -> tuple[IntArray, IntArray]:
+    """The 8 triangles of each 9-node cell (a fan about the centre node through the corner and
+    mid-side nodes, oriented like the cell): (8 C, 3) node indices and the cell of each."""
+    c = np.asarray(cells)
+    if c.ndim != 2 or c.shape[1] != 9:
+        raise ValueError(f"cells must have shape (C, 9) (9-node quadrilaterals), got {c.shape}")
+    ring = c[:, Q9_RING]
+    tri = np.stack([ring, np.roll(ring, -1, axis=1), np.repeat(c[:, [Q9_CENTRE]], 8, 1)], -1)
+    return tri.reshape(-1, 3).astype(np.intp), np.repeat(np.arange(len(c)), 8)
+
+
+@dataclass(frozen=True)
+class FabricSurface:
+    """Triangulated fabric surface: ``triangles`` (T, 3) and ``edges`` (E, 2) node indices,
+    ``cell_of`` (T,) the 9-node cell of each triangle, ``near_keys`` the sorted keys ``a n +
+    b`` of the node pairs within ``rings`` cell rings (never in contact with each other)."""
+
+    triangles: IntArray
+    cell_of: IntArray
+    edges: IntArray
+    n_nodes: int
+    near_keys: NDArray[np.int64]
+    rings: int
+
+
+def fabric_surface(cells: ArrayLike, *, n_nodes: int, rings: int = 1) -> FabricSurface:
+    """Surface of 9-node ``cells`` (C, 9) on ``n_nodes`` nodes. Nodes ``a``, ``b`` are *near*
+    (excluded from contact) when a chain of at most ``rings`` (>= 1) cells, consecutive ones
+    sharing a node, joins them; ``rings = 1``: they share a cell."""
+    if int(rings) != rings or rings < 1:
+        raise ValueError(f"rings must be an integer >= 1, got {rings!r}")
+    c = np.asarray(cells, dtype=np.intp)
+    tri, cell_of = triangulate_q9(c)
+    if c.size and (c.min() < 0 or c.max() >= n_nodes):
+        raise ValueError(f"cells must index nodes 0..{n_nodes - 1}, got {c.min()}..{c.max()}")
+    e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    edges = np.unique(e, axis=0)
+    inc = sp.csr_matrix(
+        (np.ones(c.size), (np.repeat(np.arange(len(c)), 9), c.ravel())), shape=(len(c), n_nodes)
+    )
+    share = (inc.T @ inc).astype(bool).astype(np.int8).tocsr()
+    reach = share
+    for _ in range(int(rings) - 1):
+        reach = (reach @ share).astype(bool).astype(np.int8).tocsr()
+    coo = reach.tocoo()
+    keys = np.sort(coo.row.astype(np.int64) * n_nodes + coo.col)
+    return FabricSurface(tri, cell_of, edges, int(n_nodes), keys, int(rings))
+
+
+def near_pairs(surface: FabricSurface, a: ArrayLike, b: ArrayLike) -> NDArray[np.bool_]:
+    """Whether nodes ``a[i]`` and ``b[i]`` are near (within the surface's cell rings)."""
+    keys = np.asarray(a, dtype=np.int64) * surface.n_nodes + np.asarray(b, dtype=np.int64)
+    k = surface.near_keys
+    i = np.minimum(np.searchsorted(k, keys), len(k) - 1)
+    return k[i] == keys
+
+
+# --------------------------------------------------------------------------- geometry
+def _dot(a: FloatArray, b: FloatArray) -> FloatArray:
+    return np.einsum("ij,ij->i", a, b)
+
+
+def closest_point_triangle(
+    p: FloatArray, a: FloatArray, b: FloatArray, c: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Closest points of ``p`` on triangles ``(a, b, c)`` (all (M, 3)) by the Voronoi regions
+    of Ericson (2005), Sec. 5.1.5: the points (M, 3) and their barycentric weights (M, 3)."""
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = _dot(ab, ap), _dot(ac, ap)
+    bp, cp = p - b, p - c
+    d3, d4, d5, d6 = _dot(ab, bp), _dot(ac, bp), _dot(ab, cp), _dot(ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = va + vb + vc
+        v, w = vb / den, vc / den
+        bary = np.stack([1.0 - v - w, v, w], axis=1)
+        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        t_ac = d2 / (d2 - d6)
+        t_ab = d1 / (d1 - d3)
+    one = np.ones_like(d1)
+    zero = np.zeros_like(d1)
+    # regions in reverse order of precedence (vertex A first in Ericson's tests)
+    regions = [
+        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), (zero, 1 - t_bc, t_bc)),
+        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), (1 - t_ac, zero, t_ac)),
+        ((d6 >= 0) & (d5 <= d6), (zero, zero, one)),
+        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), (1 - t_ab, t_ab, zero)),
+        ((d3 >= 0) & (d4 <= d3), (zero, one, zero)),
+        ((d1 <= 0) & (d2 <= 0), (one, zero, zero)),
+    ]
+    for sel, (w0, w1, w2) in regions:
+        bary[sel] = np.stack([w0, w1, w2], axis=1)[sel]
+    q = bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c
+    return q, bary
+
+
+def segment_closest(
+    p1: FloatArray, p2: FloatArray, q1: FloatArray, q2: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Closest points of segments ``p1 p2`` and ``q1 q2`` (Ericson 2005, Sec. 5.1.9): the
+    parameters ``s``, ``t`` in [0, 1] along each and the distances (M,) [m]."""
+    d1, d2, r = p2 - p1, q2 - q1, p1 - q1
+    a, e, f = _dot(d1, d1), _dot(d2, d2), _dot(d2, r)
+    c, b = _dot(d1, r), _dot(d1, d2)
+    den = a * e - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(den > 1e-300, np.clip((b * f - c * e) / den, 0, 1), 0.0)
+        t = (b * s + f) / e
+        s = np.where(t < 0, np.clip(-c / a, 0, 1), np.where(t > 1, np.clip((b - c) / a, 0, 1), s))
+    t = np.clip(t, 0, 1)
+    return s, t, np.linalg.norm(p1 + s[:, None] * d1 - q1 - t[:, None] * d2, axis=1)
+
+
+def segment_distance(p1: FloatArray, p2: FloatArray, q1: FloatArray, q2: FloatArray) -> FloatArray:
+    """Distances (M,) [m] between segments ``p1 p2`` and ``q1 q2``."""
+    return segment_closest(p1, p2, q1, q2)[2]
+
+
+def _unit_normals(x: FloatArray, tri: IntArray) -> FloatArray:
+    n = np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]])
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
+
+
+# --------------------------------------------------------------------------- broad phase
+@dataclass(frozen=True)
+class CandidateList:
+    """Pairs that can come within the contact distance (point-triangle) or cross (edge-edge)
+    while every node stays within ``skin / 2`` [m] of ``x_build`` (a Verlet list): the node
+    ``pt_node`` against triangle ``pt_tri`` at distance ``pt_dist`` [m] at build, and edges
+    ``ee[:, 0]``, ``ee[:, 1]`` (rows of the surface's edges) at ``ee_dist`` [m]."""
+
+    x_build: FloatArray
+    skin: float
+    pt_node: IntArray
+    pt_tri: IntArray
+    pt_dist: FloatArray
+    ee: IntArray
+    ee_dist: FloatArray
+
+    def valid(self, *xs: FloatArray) -> bool:
+        """Whether every node of every configuration ``xs`` is within skin / 2 of the build."""
+        lim = 0.5 * self.skin
+        return all(float(np.max(_moved(x, self.x_build), initial=0.0)) <= lim for x in xs)
+
+
+def _moved(x: FloatArray, x_ref: FloatArray) -> FloatArray:
+    return np.sqrt(np.einsum("ij,ij->i", x - x_ref, x - x_ref))
+
+
+def _ragged(lists) -> tuple[IntArray, IntArray]:
+    """Row and column indices of a sequence of index lists (query_ball_point output)."""
+    counts = np.fromiter((len(r) for r in lists), dtype=np.intp, count=len(lists))
+    cols = np.fromiter((j for r in lists for j in r), dtype=np.intp, count=int(counts.sum()))
+    return np.repeat(np.arange(len(lists)), counts), cols
+
+
+def build_candidates(
+    x: FloatArray, surface: FabricSurface, *, distance: float, skin: float
+) -> CandidateList:
+    """Candidate pairs at positions ``x`` (N, 3): point-triangle and edge-edge pairs closer
+    than ``distance + skin`` (exact distances after a cKDTree query on triangle centroids /
+    edge midpoints), near pairs excluded."""
+    tri, edges = surface.triangles, surface.edges
+    xt = x[tri]
+    cen = xt.mean(axis=1)
+    rad = float(np.max(np.linalg.norm(xt - cen[:, None], axis=2), initial=0.0))
+    reach = distance + skin
+    node, t = _ragged(cKDTree(cen).query_ball_point(x, reach + rad))
+    far = ~(near_pairs(surface, node, tri[t, 0]) | near_pairs(surface, node, tri[t, 1]))
+    far &= ~near_pairs(surface, node, tri[t, 2])
+    node, t = node[far], t[far]
+    q, _ = closest_point_triangle(x[node], *(x[tri[t, k]] for k in range(3)))
+    dist = np.linalg.norm(x[node] - q, axis=1)
+    keep = dist < reach
+    xe = x[edges]
+    mid = xe.mean(axis=1)
+    half = float(np.max(np.linalg.norm(xe[:, 0] - xe[:, 1], axis=1), initial=0.0))
+    ee = cKDTree(mid).query_pairs(reach + half, output_type="ndarray").astype(np.intp)
+    e0, e1 = edges[ee[:, 0]], edges[ee[:, 1]]
+    far = np.ones(len(ee), dtype=bool)
+    for i in range(2):
+        for j in range(2):
+            far &= ~near_pairs(surface, e0[:, i], e1[:, j])
+    ee = ee[far]
+    e0, e1 = edges[ee[:, 0]], edges[ee[:, 1]]
+    ed = segment_distance(x[e0[:, 0]], x[e0[:, 1]], x[e1[:, 0]], x[e1[:, 1]])
+    close = ed < reach
+    return CandidateList(
+        x.copy(), float(skin), node[keep], t[keep], dist[keep], ee[close], ed[close]
+    )
+
+
+# --------------------------------------------------------------------------- narrow phase
+class PairContacts(NamedTuple):
+    """Point-triangle pairs: nodes ``idx`` (M, 4) = (p, a, b, c), coefficients ``coef`` (M, 4)
+    = (1, -w0, -w1, -w2), unit ``normal`` (M, 3) from the triangle to the node, ``gap`` (M,)
+    [m] along it, ``tri`` (M,) the triangle; edge pairs (:func:`edge_contacts`): the nodes
+    of both edges, coefficients ``(1 - s, s, t - 1, -t)``, ``tri = -1``."""
+
+    idx: IntArray
+    coef: FloatArray
+    normal: FloatArray
+    gap: FloatArray
+    tri: IntArray
+
+
+def pair_contacts(
+    x0: FloatArray, x: FloatArray, surface: FabricSurface, node: IntArray, tri: IntArray
+) -> PairContacts:
+    """Gaps and normals of node-triangle pairs at ``x``. Closest point inside the face: the
+    triangle normal, signed by the side the node was on at the step's start ``x0`` (so a
+    node that passed through the face gets ``gap < 0``); on an edge or vertex: the direction
+    from the closest point to the node."""
+    t = surface.triangles[tri]
+    q, w = closest_point_triangle(x[node], x[t[:, 0]], x[t[:, 1]], x[t[:, 2]])
+    r = x[node] - q
+    dist = np.linalg.norm(r, axis=1)
+    nf = _unit_normals(x, t)
+    q0 = np.einsum("ij,ijk->ik", w, x0[t])
+    side = np.sign(_dot(x0[node] - q0, _unit_normals(x0, t)))
+    side = np.where(side == 0, np.sign(_dot(r, nf)), side)
+    side = np.where(side == 0, 1.0, side)
+    face = np.all(w > _FACE_EPS, axis=1) | (dist <= 1e-12 * max(1.0, float(np.abs(x).max())))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = np.where(face[:, None], side[:, None] * nf, r / dist[:, None])
+    gap = np.where(face, _dot(r, n), dist)
+    idx = np.column_stack([node, t])
+    coef = np.column_stack([np.ones(len(node)), -w])
+    return PairContacts(idx, coef, n, gap, tri)
+
+
+def edge_contacts(
+    x0: FloatArray, x: FloatArray, surface: FabricSurface, ee: IntArray
+) -> PairContacts:
+    """Gaps and normals of edge pairs ``ee`` (M, 2) at ``x``: the normal points from the
+    second edge's closest point to the first's, reversed (``gap < 0``) when the same points
+    were on the other side at the step's start ``x0``."""
+    e0, e1 = surface.edges[ee[:, 0]], surface.edges[ee[:, 1]]
+    idx = np.column_stack([e0, e1])
+    s, t, dist = segment_closest(*(x[idx[:, k]] for k in range(4)))
+    coef = np.column_stack([1 - s, s, t - 1, -t])
+    r, r0 = _relative(x, idx, coef), _relative(x0, idx, coef)
+    tiny = dist <= 1e-12 * max(1.0, float(np.abs(x).max()))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = np.where(tiny[:, None], r0 / np.linalg.norm(r0, axis=1)[:, None], r / dist[:, None])
+    side = np.where(_dot(r0, n) < 0, -1.0, 1.0)
+    n = np.nan_to_num(side[:, None] * n)
+    return PairContacts(idx, coef, n, _dot(r, n), np.full(len(ee), -1, dtype=np.intp))
+
+
+def _closest_per_key(c: PairContacts, key: IntArray) -> PairContacts:
+    """Per ``key`` (the node of a node-triangle pair, the first edge of an edge pair) the
+    closest pair on each side (normals agreeing with or opposing its closest pair's): a node
+    pressed between two layers keeps both."""
+    if len(c.gap) == 0:
+        return c
+    order = np.lexsort((c.gap, key))
+    node = key[order]
+    first = np.r_[True, node[1:] != node[:-1]]
+    head = order[np.maximum.accumulate(np.where(first, np.arange(len(node)), 0))]
+    group = node * 2 + (_dot(c.normal[order], c.normal[head]) < 0)
+    by = np.lexsort((c.gap[order], group))
+    g = group[by]
+    keep = order[by[np.r_[True, g[1:] != g[:-1]]]]
+    return PairContacts(*(a[keep] for a in c))
+
+
+# --------------------------------------------------------------------------- response
+def _scaling(idx: IntArray, coef: FloatArray, inv_m: FloatArray) -> FloatArray:
+    """Jacobi diagonal (M,) [1/kg] of ``G M^-1 G^T``, inflated to the Gershgorin row sums
+    (``sum_k |coef_ck| s_k / m_k``, ``s_k = sum_c |coef_ck|``) so that the simultaneous
+    update converges; exact (``1/m_p + sum w^2/m_k``) for an isolated pair."""
+    a = np.abs(coef)
+    s = np.bincount(idx.ravel(), weights=a.ravel(), minlength=len(inv_m))
+    return np.sum(a * s[idx] * inv_m[idx], axis=1)
+
+
+def _apply(y: FloatArray, idx: IntArray, coef: FloatArray, imp: FloatArray, inv_m: FloatArray):
+    """``y_k += inv_m_k sum_c coef_ck imp_c`` in place (imp (M, 3): impulse vectors)."""
+    w = (coef[:, :, None] * imp[:, None, :]).reshape(-1, 3)
+    flat = idx.ravel()
+    for k in range(3):
+        y[:, k] += inv_m * np.bincount(flat, weights=w[:, k], minlength=len(y))
+
+
+def _relative(y: FloatArray, idx: IntArray, coef: FloatArray) -> FloatArray:
+    return np.einsum("ij,ijk->ik", coef, y[idx])
+
+
+def _accelerated(
+    y0: FloatArray, c: PairContacts, inv_m: FloatArray, residual, project, passes: int, tol: float
+) -> tuple[FloatArray, FloatArray]:
+    """Projected gradient with Nesterov momentum and adaptive restart (O'Donoghue & Candes
+    2015) on the pair impulses P (M, 3), preconditioned by :func:`_scaling`: minimises the
+    quadratic whose gradient is ``residual(y)`` at ``y = y0 + M^-1 G^T P`` subject to
+    ``P = project(P)``. Stops when no impulse changes by more than ``tol`` x its scaling
+    (``tol`` in the units of ``y``). Returns ``y`` and ``P``."""
+    D = _scaling(c.idx, c.coef, inv_m)
+    ok = (D > 0)[:, None]
+    Dz = np.where(ok[:, 0], D, 1.0)[:, None]
+    P = np.zeros((len(D), 3))
+    Y, t = P, 1.0
+    for _ in range(passes):
+        y = y0.copy()
+        _apply(y, c.idx, c.coef, Y, inv_m)
+        g = residual(y)
+        Pn = np.where(ok, project(Y - g / Dz), 0.0)
+        step = Pn - P
+        done = float(np.max(np.abs(step) * Dz, initial=0.0)) <= tol
+        if np.sum(g * step) > 0:  # momentum points uphill: restart
+            t, t1 = 1.0, 1.0
+        else:
+            t1 = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * t * t))
+        Y = Pn + ((t - 1.0) / t1) * step
+        P, t = Pn, t1
+        if done:
+            break
+    y = y0.copy()
+    _apply(y, c.idx, c.coef, P, inv_m)
+    return y, P
+
+
+def _normal_solve(y0, c: PairContacts, inv_m, target: float, passes: int, tol: float):
+    n = c.normal
+
+    def residual(y):
+        return (_dot(_relative(y, c.idx, c.coef), n) - target)[:, None] * n
+
+    def project(P):
+        return np.maximum(_dot(P, n), 0.0)[:, None] * n
+
+    y, P = _accelerated(y0, c, inv_m, residual, project, passes, tol)
+    return y, _dot(P, n)
+
+
+def project_positions(
+    x: FloatArray,
+    c: PairContacts,
+    inv_m: FloatArray,
+    *,
+    distance: float,
+    passes: int,
+    tol: float,
+) -> tuple[FloatArray, FloatArray]:
+    """Mass-weighted projection of the pairs to ``gap >= distance`` (normals and weights held):
+    corrected positions and the position multipliers ``m_eff dgap`` (M,) [kg m] (FILM's
+    ``lambda dt^2``, Eq. 25 for one pair). ``tol`` [m]: convergence of the gaps."""
+    return _normal_solve(x, c, inv_m, distance, passes, tol)
+
+
+def normal_impulses(
+    v: FloatArray, c: PairContacts, inv_m: FloatArray, *, passes: int, tol: float
+) -> tuple[FloatArray, FloatArray]:
+    """Inelastic normal impulses ``J >= 0`` (M,) [N s] that stop every pair's approach (zero
+    relative normal velocity where ``J > 0``, none approaching; ``tol`` [m/s]): the new
+    velocities and ``J``."""
+    return _normal_solve(v, c, inv_m, 0.0, passes, tol)
+
+
+def friction_impulses(
+    v: FloatArray,
+    c: PairContacts,
+    inv_m: FloatArray,
+    Jn: FloatArray,
+    *,
+    mu: float,
+    passes: int,
+    tol: float,
+) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    """Coulomb friction on impulses: tangential impulses ``|Jt| <= mu Jn`` (M, 3) [N s] that
+    bring the tangential relative velocity to zero where the limit allows (stick), else
+    ``|Jt| = mu Jn`` against it (slip). Returns the new velocities, ``Jt``, the stick mask."""
+    n, lim = c.normal, mu * np.asarray(Jn)
+
+    def residual(y):
+        r = _relative(y, c.idx, c.coef)
+        return r - _dot(r, n)[:, None] * n
+
+    def project(P):
+        P = P - _dot(P, n)[:, None] * n
+        mag = np.linalg.norm(P, axis=1)
+        return P * np.where(mag > lim, lim / np.where(mag > 0, mag, 1.0), 1.0)[:, None]
+
+    v, Jt = _accelerated(v, c, inv_m, residual, project, passes, tol)
+    return v, Jt, np.linalg.norm(Jt, axis=1) < lim * (1.0 - 1e-9)
+
+
+# --------------------------------------------------------------------------- fail-safe
+def _cubic(
+    u0: FloatArray, du: FloatArray, v0: FloatArray, dv: FloatArray, w0: FloatArray, dw: FloatArray
+) -> FloatArray:
+    """Coefficients (M, 4) of ``det[u0 + t du, v0 + t dv, w0 + t dw]`` in powers of t."""
+    c0 = _dot(u0, np.cross(v0, w0))
+    c1 = _dot(du, np.cross(v0, w0)) + _dot(u0, np.cross(dv, w0)) + _dot(u0, np.cross(v0, dw))
+    c2 = _dot(du, np.cross(dv, w0)) + _dot(du, np.cross(v0, dw)) + _dot(u0, np.cross(dv, dw))
+    c3 = _dot(du, np.cross(dv, dw))
+    return np.stack([c0, c1, c2, c3], axis=1)
+
+
+def _poly(c: FloatArray, t: FloatArray) -> FloatArray:
+    return ((c[:, 3] * t + c[:, 2]) * t + c[:, 1]) * t + c[:, 0]
+
+
+def _unit_roots(c: FloatArray, iterations: int = 60) -> FloatArray:
+    """The (up to 3) roots in [0, 1] of cubics (M, 4), (M, 3) with nan where none: the cubic
+    is split at the roots of its derivative into monotone pieces, each bisected."""
+    a, b, cc = 3 * c[:, 3], 2 * c[:, 2], c[:, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        disc = np.sqrt(b * b - 4 * a * cc)
+        lin = np.abs(a) <= 1e-300
+        r1 = np.where(lin, -cc / np.where(b == 0, np.inf, b), (-b - disc) / (2 * a))
+        r2 = np.where(lin, np.nan, (-b + disc) / (2 * a))
+    crit = np.sort(np.clip(np.nan_to_num(np.stack([r1, r2], 1), nan=1.0), 0, 1), axis=1)
+    knots = np.column_stack([np.zeros(len(c)), crit, np.ones(len(c))])
+    out = np.full((len(c), 3), np.nan)
+    for k in range(3):
+        lo, hi = knots[:, k].copy(), knots[:, k + 1].copy()
+        flo, fhi = _poly(c, lo), _poly(c, hi)
+        has = (flo * fhi <= 0) & (hi >= lo)
+        for _ in range(iterations):
+            mid = 0.5 * (lo + hi)
+            fm = _poly(c, mid)
+            left = (flo * fm) <= 0
+            hi, lo = np.where(left, mid, hi), np.where(left, lo, mid)
+            flo = np.where(left, flo, fm)
+        out[has, k] = 0.5 * (lo + hi)[has]
+    return out
+
+
+def point_triangle_crossings(
+    x0: FloatArray,
+    x1: FloatArray,
+    surface: FabricSurface,
+    node: IntArray,
+    tri: IntArray,
+    eps: float,
+) -> NDArray[np.bool_]:
+    """Whether node ``node[i]`` comes within ``eps`` [m] of triangle ``tri[i]`` at a time its
+    point is coplanar with the triangle, along the straight paths from ``x0`` to ``x1``."""
+    t = surface.triangles[tri]
+    P = [node, t[:, 0], t[:, 1], t[:, 2]]
+    d = [x1[i] - x0[i] for i in P]
+    co = _cubic(
+        x0[P[1]] - x0[P[0]], d[1] - d[0], x0[P[2]] - x0[P[0]], d[2] - d[0],
+        x0[P[3]] - x0[P[0]], d[3] - d[0],
+    )  # fmt: skip
+    hit = np.zeros(len(node), dtype=bool)
+    for tt in _unit_roots(co).T:
+        s = np.flatnonzero(np.isfinite(tt))
+        if s.size == 0:
+            continue
+        pos = [x0[i[s]] + tt[s, None] * dk[s] for i, dk in zip(P, d, strict=True)]
+        q, _ = closest_point_triangle(*pos)
+        hit[s] |= np.linalg.norm(pos[0] - q, axis=1) <= eps
+    return hit
+
+
+def edge_edge_crossings(
+    x0: FloatArray, x1: FloatArray, surface: FabricSurface, ee: IntArray, eps: float
+) -> NDArray[np.bool_]:
+    """Whether edge pairs ``ee`` (M, 2) come within ``eps`` [m] of each other at a time their
+    four nodes are coplanar, along the straight paths from ``x0`` to ``x1``."""
+    e0, e1 = surface.edges[ee[:, 0]], surface.edges[ee[:, 1]]
+    P = [e0[:, 0], e0[:, 1], e1[:, 0], e1[:, 1]]
+    d = [x1[i] - x0[i] for i in P]
+    co = _cubic(
+        x0[P[1]] - x0[P[0]], d[1] - d[0], x0[P[2]] - x0[P[0]], d[2] - d[0],
+        x0[P[3]] - x0[P[0]], d[3] - d[0],
+    )  # fmt: skip
+    hit = np.zeros(len(ee), dtype=bool)
+    for tt in _unit_roots(co).T:
+        s = np.flatnonzero(np.isfinite(tt))
+        if s.size == 0:
+            continue
+        pos = [x0[i[s]] + tt[s, None] * dk[s] for i, dk in zip(P, d, strict=True)]
+        hit[s] |= segment_distance(*pos) <= eps
+    return hit
+
+
+def _pair_motion(cands: CandidateList, x0: FloatArray, x1: FloatArray, nodes: IntArray):
+    """Largest distance from the build of the nodes of each pair (rows of ``nodes``) at the
+    step's ends (and so along it): a pair's distance changes by at most twice that."""
+    moved = np.maximum(_moved(x0, cands.x_build), _moved(x1, cands.x_build))
+    return moved[nodes].max(axis=1)
+
+
+def _crossings(cands, surface, x0, x1, eps) -> tuple[IntArray, IntArray]:
+    """Node groups (rows of 4) of the point-triangle and edge-edge pairs that cross."""
+    tri = surface.triangles[cands.pt_tri]
+    g_pt = np.column_stack([cands.pt_node, tri])
+    g_ee = np.column_stack([surface.edges[cands.ee[:, 0]], surface.edges[cands.ee[:, 1]]])
+    s_pt = np.flatnonzero(cands.pt_dist - 2 * _pair_motion(cands, x0, x1, g_pt) <= eps)
+    s_ee = np.flatnonzero(cands.ee_dist - 2 * _pair_motion(cands, x0, x1, g_ee) <= eps)
+    h_pt = point_triangle_crossings(x0, x1, surface, cands.pt_node[s_pt], cands.pt_tri[s_pt], eps)
+    h_ee = edge_edge_crossings(x0, x1, surface, cands.ee[s_ee], eps)
+    return g_pt[s_pt[h_pt]], g_ee[s_ee[h_ee]]
+
+
+def _impact_zones(
+    x0: FloatArray,
+    x1: FloatArray,
+    v: FloatArray,
+    mass: FloatArray,
+    fixed: NDArray[np.bool_],
+    links: IntArray,
+) -> IntArray:
+    """Merge the node groups ``links`` (K, 4) into zones (connected components) and move each
+    zone rigidly by its mass-weighted mean displacement with its mean velocity (a perfectly
+    inelastic collision of the zone; momentum conserved; a zone holding prescribed nodes
+    takes their mean motion). ``x1``, ``v`` in place; returns the zone nodes."""
+    n = len(x0)
+    a = np.repeat(links[:, :1], 3, axis=1).ravel()
+    b = links[:, 1:].ravel()
+    g = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
+    _, lab = connected_components(g, directed=False)
+    nodes = np.unique(links)
+    zl = lab[nodes]
+    _, zi = np.unique(zl, return_inverse=True)
+    w = np.where(fixed[nodes], 1.0, 0.0)
+    has_fixed = np.bincount(zi, weights=w) > 0
+    w = np.where(has_fixed[zi], w, mass[nodes])
+    tot = np.bincount(zi, weights=w)
+    dx = x1[nodes] - x0[nodes]
+    for k in range(3):
+        mdx = np.bincount(zi, weights=w * dx[:, k]) / tot
+        mv = np.bincount(zi, weights=w * v[nodes, k]) / tot
+        x1[nodes, k] = x0[nodes, k] + mdx[zi]
+        v[nodes, k] = mv[zi]
+    return nodes
+
+
+# --------------------------------------------------------------------------- the step
+@dataclass(frozen=True, kw_only=True)
+class SelfContactParameters:
+    """distance: contact distance d [m] between mid-surfaces (> 0; the fabric thickness or a
+    multiple of it); mu: Coulomb coefficient between layers (>= 0); rings: cell rings around
+    a node excluded from its contacts (>= 1); skin: Verlet-list skin [m] (> 0; default d /
+    2); passes: Jacobi passes of each response stage (>= 1); tolerance: allowed gap
+    deficit, fraction of d (0 < tol < 1); failsafe_passes: crossing checks and impact-zone
+    merges per step (>= 1); eps: crossing proximity, fraction of d (0 < eps < 1)."""
+
+    distance: float
+    mu: float = 0.0
+    rings: int = 1
+    skin: float | None = None
+    passes: int = 50
+    tolerance: float = 0.01
+    failsafe_passes: int = 8
+    eps: float = 1e-3
+
+    def __post_init__(self) -> None:
+        def bad(name, value, rule):
+            raise ValueError(f"SelfContactParameters {name} must be {rule}, got {value!r}")
+
+        if not (np.isfinite(self.distance) and self.distance > 0):
+            bad("distance", self.distance, "> 0 m")
+        if not (np.isfinite(self.mu) and self.mu >= 0):
+            bad("mu", self.mu, ">= 0")
+        if self.skin is not None and not (np.isfinite(self.skin) and self.skin > 0):
+            bad("skin", self.skin, "None or > 0 m")
+        for name in ("rings", "passes", "failsafe_passes"):
+            val = getattr(self, name)
+            if int(val) != val or val < 1:
+                bad(name, val, "an integer >= 1")
+        for name in ("tolerance", "eps"):
+            val = getattr(self, name)
+            if not (0 < val < 1):
+                bad(name, val, "in (0, 1)")
+
+    @property
+    def skin_length(self) -> float:
+        return 0.5 * self.distance if self.skin is None else float(self.skin)
+
+
+class SelfContactResult(NamedTuple):
+    """One self-contact correction of N nodes: corrected positions ``x`` [m] and velocities
+    ``v`` [m/s]; ``contacts`` the pairs in contact, their position multipliers ``lam`` [kg m]
+    (``lam / dt^2`` is FILM's multiplier in N), normal impulses ``jn`` [N s] and tangential
+    impulses ``jt`` (M, 3) [N s], ``stick`` mask; ``max_deficit`` the largest ``d - gap`` of
+    the predictor [m]; ``min_gap`` the smallest pair gap after [m] (inf: no pair);
+    ``crossings`` crossing pairs found in the first fail-safe pass, ``crossings_left`` after
+    the last; ``zone_nodes`` nodes moved as impact zones; ``rebuilt`` whether the candidate
+    list was rebuilt; ``candidates`` the list (pass it to the next step)."""
+
+    x: FloatArray
+    v: FloatArray
+    contacts: PairContacts
+    lam: FloatArray
+    jn: FloatArray
+    jt: FloatArray
+    stick: NDArray[np.bool_]
+    max_deficit: float
+    min_gap: float
+    crossings: int
+    crossings_left: int
+    zone_nodes: int
+    rebuilt: bool
+    candidates: CandidateList
+
+
+def _list_for(cands, x_now, x_other, surface, p: SelfContactParameters) -> tuple:
+    """The candidate list valid for ``x_now`` and ``x_other`` (rebuilt at ``x_now`` if not)."""
+    if cands is not None and cands.valid(x_now, x_other):
+        return cands, False
+    span = float(np.max(_moved(x_now, x_other), initial=0.0))
+    skin = max(p.skin_length, 2.5 * span)
+    return build_candidates(x_now, surface, distance=p.distance, skin=skin), True
+
+
+def self_contact_step(
+    x0: ArrayLike,
+    x_star: ArrayLike,
+    v_star: ArrayLike,
+    mass: ArrayLike,
+    dt: float,
+    surface: FabricSurface,
+    *,
+    params: SelfContactParameters,
+    fixed: ArrayLike | None = None,
+    candidates: CandidateList | None = None,
+) -> SelfContactResult:
+    """Self-contact correction of the predictor ``x_star`` (N, 3) [m] with half-step
+    velocities ``v_star`` [m/s], from the crossing-free start ``x0`` of the step of ``dt``
+    [s], lumped ``mass`` (N,) [kg]; ``fixed`` (N,) nodes are not corrected."""
+    x0, xs, vs = (np.asarray(a, dtype=float) for a in (x0, x_star, v_star))
+    n, p = surface.n_nodes, params
+    if not (x0.shape == xs.shape == vs.shape == (n, 3)):
+        raise ValueError(f"x0, x_star, v_star must have shape ({n}, 3), got {xs.shape}")
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be > 0 s, got {dt!r}")
+    m = np.broadcast_to(np.asarray(mass, dtype=float), (n,))
+    if not np.all(m > 0):
+        raise ValueError("mass must be > 0 kg at every node")
+    fx = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed, dtype=bool)
+    inv_m = np.where(fx, 0.0, 1.0 / m)
+    d, tol = p.distance, p.tolerance * p.distance
+    cands, rebuilt = _list_for(candidates, xs, x0, surface, p)
+    # pairs that can be within d now: build distance minus the motion since the build
+    g = np.column_stack([cands.pt_node, surface.triangles[cands.pt_tri]])
+    sel = np.flatnonzero(cands.pt_dist - 2 * _moved(xs, cands.x_build)[g].max(axis=1) < d)
+    c = pair_contacts(x0, xs, surface, cands.pt_node[sel], cands.pt_tri[sel])
+    c = PairContacts(*(a[c.gap < d + tol] for a in c))
+    c = _closest_per_key(c, c.idx[:, 0])
+    ge = surface.edges[cands.ee].reshape(-1, 4)
+    sel = np.flatnonzero(cands.ee_dist - 2 * _moved(xs, cands.x_build)[ge].max(axis=1) < d)
+    ce = edge_contacts(x0, xs, surface, cands.ee[sel])
+    close = ce.gap < d + tol
+    ce = _closest_per_key(PairContacts(*(a[close] for a in ce)), cands.ee[sel][close, 0])
+    c = PairContacts(*(np.concatenate([a, b]) for a, b in zip(c, ce, strict=True)))
+    deficit = float(np.max(d - c.gap, initial=0.0))
+    x, lam = project_positions(xs, c, inv_m, distance=d, passes=p.passes, tol=1e-3 * tol)
+    v, jn = normal_impulses(vs, c, inv_m, passes=p.passes, tol=1e-9 * _speed(vs))
+    jt, stick = np.zeros((len(jn), 3)), np.ones(len(jn), dtype=bool)
+    if p.mu > 0 and len(jn):
+        v1, jt, stick = friction_impulses(
+            v, c, inv_m, jn, mu=p.mu, passes=p.passes, tol=1e-9 * _speed(vs)
+        )
+        x += dt * (v1 - v)
+        v = v1
+    x, v, found, left, zone = _failsafe(x0, x, v, m, fx, surface, cands, p)
+    min_gap = float(np.min(_dot(_relative(x, c.idx, c.coef), c.normal), initial=np.inf))
+    return SelfContactResult(
+        x, v, c, lam, jn, jt, stick, deficit, min_gap, found, left, zone, rebuilt, cands
+    )
+
+
+def _speed(v: FloatArray) -> float:
+    return max(float(np.max(np.abs(v), initial=0.0)), 1e-30)
+
+
+def _failsafe(x0, x, v, m, fx, surface, cands, p: SelfContactParameters):
+    """Crossing check over the step and impact zones until none is left (or the passes are
+    used up): positions, velocities, crossings of the first and last pass, zone nodes."""
+    eps = p.eps * p.distance
+    found, links, zone = -1, np.zeros((0, 4), dtype=np.intp), np.zeros(0, dtype=np.intp)
+    for _ in range(p.failsafe_passes):
+        cands, _ = _list_for(cands, x, x0, surface, p)
+        pt, ee = _crossings(cands, surface, x0, x, eps)
+        count = len(pt) + len(ee)
+        found = count if found < 0 else found
+        if count == 0:
+            return x, v, found, 0, len(zone)
+        links = np.concatenate([links, pt, ee])
+        x, v = x.copy(), v.copy()
+        zone = _impact_zones(x0, x, v, m, fx, links)
+    cands, _ = _list_for(cands, x, x0, surface, p)
+    pt, ee = _crossings(cands, surface, x0, x, eps)
+    return x, v, found, len(pt) + len(ee), len(zone)
+
+
+# --------------------------------------------------------------------------- explicit runner
+@dataclass(frozen=True)
+class SelfContactRecord:
+    """Self-contact diagnostics of the steps since the previous :meth:`SelfContact.collect`
+    (identical on every rank: the correction is computed redundantly)."""
+
+    time: float  # of the window's last step [s]
+    steps: int  # explicit steps in the window
+    contacts: int  # node-triangle pairs in contact in the last step
+    max_deficit: float  # largest d - gap of a predictor in the window [m] (0: none closer)
+    min_gap: float  # smallest pair gap after the corrections in the window [m]
+    normal_impulse: float  # sum of the normal impulses, mean over the window's steps [N s]
+    crossings: int  # crossing pairs the fail-safe found in the window
+    crossings_left: int  # crossing pairs left after the fail-safe in the window
+    zone_nodes: int  # nodes moved in impact zones in the window
+    rebuilds: int  # candidate-list rebuilds in the window
+    wall: float  # seconds spent in the self-contact correction in the window
+
+
+def global_cells(V) -> tuple[IntArray, int, int]:
+    """The 9-node cells of a dolfinx Q2 vector space ``V`` on every rank in global node
+    numbers (owned cells of each rank, in rank order), the number of nodes and the first
+    global number of this rank's owned nodes (collective)."""
+    comm, im = V.mesh.comm, V.dofmap.index_map
+    n_cells = V.mesh.topology.index_map(V.mesh.topology.dim).size_local
+    local = V.dofmap.list.array.reshape(-1, V.dofmap.dof_layout.num_dofs)[:n_cells]
+    if local.shape[1] != 9:
+        raise ValueError(f"self-contact needs 9-node cells (Q2), got {local.shape[1]} nodes")
+    glob = im.local_to_global(local.ravel().astype(np.int32)).reshape(-1, 9)
+    cells = np.concatenate(comm.allgather(glob.astype(np.int64))).astype(np.intp)
+    return cells, int(im.size_global), int(im.local_range[0])
+
+
+def mesh_nodes(mesh) -> tuple[FloatArray, IntArray]:
+    """Node positions (N, 3) [m] and 9-node cells (C, 9) of an order-2 quadrilateral dolfinx
+    ``mesh`` in the numbering of its Q2 space, the whole mesh on every rank (collective)."""
+    from dolfinx import fem
+
+    V = fem.VectorFunctionSpace(mesh, ("Q", 2))
+    cells, _, _ = global_cells(V)
+    n = V.dofmap.index_map.size_local
+    X = np.concatenate(mesh.comm.allgather(V.tabulate_dof_coordinates()[:n]))
+    return X, cells
+
+
+class SelfContact:
+    """Self-contact of a :class:`clothfem.dynamics.ShellSystem` in
+    :func:`clothfem.dynamics.integrate_explicit`, after a :class:`FilmContact` ``film``.
+
+    Every rank gathers all node positions and velocities (three ``Allgatherv`` of 3 N
+    doubles per step), runs :func:`self_contact_step` on the whole surface -- the same input
+    and operations give the same bits on every rank -- and writes back its owned nodes. The
+    step's start positions are the model's state when the step's correction is called
+    (``integrate_explicit`` evaluates the forces at the corrected positions afterwards).
+    """
+
+    def __init__(self, system, *, params: SelfContactParameters, film=None) -> None:
+        self.system, self.model, self.params, self.film = system, system.model, params, film
+        self.comm = self.model.comm
+        n = self.n = self.model.n_owned
+        cells, n_glob, self.lo = global_cells(self.model.V)
+        self.surface = fabric_surface(cells, n_nodes=n_glob, rings=params.rings)
+        self._counts = np.array(self.comm.allgather(3 * n))
+        self.X = self._gather(self.model.x_nodes[:n])
+        self.mass = self._gather(np.repeat(system.lumped_u[0 : 3 * n : 3], 3).reshape(n, 3))[:, 0]
+        self.fixed = np.zeros(n_glob, dtype=bool)
+        self._rows: np.ndarray | None = None
+        self.candidates: CandidateList | None = None
+        self.last: SelfContactResult | None = None
+        self._v_own: FloatArray | None = None
+        self.history: list[SelfContactRecord] = []
+        self.wall, self.time = 0.0, 0.0
+        self._window = self._empty_window()
+
+    def _gather(self, a: FloatArray) -> FloatArray:
+        out = np.empty(int(self._counts.sum()))
+        self.comm.Allgatherv(np.ascontiguousarray(a, dtype=float).ravel(), [out, self._counts])
+        return out.reshape(-1, 3)
+
+    def _set_fixed(self, rows) -> None:
+        rows = np.asarray(rows)
+        if self._rows is not None and np.array_equal(rows, self._rows):
+            return
+        self._rows = rows.copy()
+        own = np.zeros((self.n, 3))
+        own[rows[rows < 3 * self.n] // 3] = 1.0
+        self.fixed = self._gather(own)[:, 0] > 0
+
+    def correct_positions(self, x, v_pred, t: float, h: float, rows) -> None:
+        """FILM (if given), then the self-contact correction of the predictor ``x`` (in place);
+        the velocities are written by :meth:`correct_velocities`."""
+        if self.film is not None:
+            self.film.correct_positions(x, v_pred, t, h, rows)
+            self.film.correct_velocities(v_pred)
+        t0 = time.perf_counter()
+        n, lo = self.n, self.lo
+        self._set_fixed(rows)
+        u = x.getArray()[: 3 * n].reshape(n, 3)
+        v = v_pred.getArray(readonly=True)[: 3 * n].reshape(n, 3)
+        x0 = self.X + self._gather(self.model.u.x.array[: 3 * n])
+        xs, vs = self.X + self._gather(u), self._gather(v)
+        res = self_contact_step(
+            x0, xs, vs, self.mass, h, self.surface,
+            params=self.params, fixed=self.fixed, candidates=self.candidates,
+        )  # fmt: skip
+        self.candidates, self.last = res.candidates, res
+        own = slice(lo, lo + n)
+        moved = np.flatnonzero(np.any(res.x[own] != xs[own], axis=1))
+        u[moved] = res.x[own][moved] - self.X[own][moved]
+        self._v_own = res.v[own]
+        self._record(res, t, time.perf_counter() - t0)
+
+    def correct_velocities(self, v) -> None:
+        """The corrected half-step velocities of the owned nodes (in place)."""
+        if self._v_own is None:
+            return
+        va = v.getArray()[: 3 * self.n].reshape(self.n, 3)
+        changed = np.flatnonzero(np.any(self._v_own != va, axis=1))
+        va[changed] = self._v_own[changed]
+
+    @staticmethod
+    def _empty_window() -> dict:
+        return {
+            "steps": 0, "contacts": 0, "deficit": 0.0, "gap": np.inf, "jn": 0.0, "found": 0,
+            "left": 0, "zone": 0, "rebuilds": 0, "wall": 0.0,
+        }  # fmt: skip
+
+    def _record(self, res: SelfContactResult, t: float, wall: float) -> None:
+        w = self._window
+        w["steps"] += 1
+        w["deficit"] = max(w["deficit"], res.max_deficit)
+        w["gap"] = min(w["gap"], res.min_gap)
+        w["jn"] += float(res.jn.sum())
+        w["found"] += res.crossings
+        w["left"] += res.crossings_left
+        w["zone"] += res.zone_nodes
+        w["rebuilds"] += int(res.rebuilt)
+        w["wall"] += wall
+        w["contacts"] = len(res.jn)
+        self.time = t
+        self.wall += wall
+
+    def collect(self) -> SelfContactRecord:
+        """The diagnostics of the steps since the previous call (appended to
+        :attr:`history`; not collective: every rank holds the same values)."""
+        w = self._window
+        if w["steps"] == 0:
+            raise RuntimeError("SelfContact.collect: no step since the last collect")
+        rec = SelfContactRecord(
+            time=self.time,
+            steps=w["steps"],
+            contacts=w["contacts"],
+            max_deficit=w["deficit"],
+            min_gap=w["gap"],
+            normal_impulse=w["jn"] / w["steps"],
+            crossings=w["found"],
+            crossings_left=w["left"],
+            zone_nodes=w["zone"],
+            rebuilds=w["rebuilds"],
+            wall=w["wall"],
+        )
+        self.history.append(rec)
+        self._window = self._empty_window()
+        return rec
+
+    @classmethod
+    def from_scene(cls, system, contact: dict, *, film=None) -> SelfContact | None:
+        """From a scene's ``contact`` section: None unless ``self_contact`` is true; the
+        distance ``self_distance`` [m] (default: the fabric thickness) and ``self_mu``
+        (default: ``mu``)."""
+        if not contact.get("self_contact", False):
+            return None
+        d = contact.get("self_distance") or system.model.thickness
+        mu = contact.get("self_mu")
+        mu = contact.get("mu", 0.0) if mu is None else mu
+        return cls(system, params=SelfContactParameters(distance=d, mu=mu), film=film)
