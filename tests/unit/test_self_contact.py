@@ -1,0 +1,166 @@
+"""Unit tests of clothfem.contact.self_contact and clothfem.contact.intersections (point
+masses on meshes built on ``MPI.COMM_SELF``: every rank runs the same checks)."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from clothfem import mesh as meshes
+from clothfem.contact import intersections as ix
+from clothfem.contact import self_contact as sc
+
+RNG = np.random.default_rng(7)
+
+
+@pytest.fixture(scope="module")
+def strip():
+    sm = meshes.strip(MPI.COMM_SELF, length=0.04, width=0.02, nx=4, ny=2)
+    return sc.mesh_nodes(sm.mesh)
+
+
+def test_triangulation_covers_each_cell_with_consistent_orientation(strip):
+    X, cells = strip
+    tri, cell_of = sc.triangulate_q9(cells)
+    assert tri.shape == (8 * len(cells), 3)
+    np.testing.assert_array_equal(np.bincount(cell_of), np.full(len(cells), 8))
+    n = np.cross(X[tri[:, 1]] - X[tri[:, 0]], X[tri[:, 2]] - X[tri[:, 0]])
+    np.testing.assert_allclose(0.5 * np.linalg.norm(n, axis=1).sum(), 0.04 * 0.02, rtol=1e-12)
+    assert np.all(n[:, 2] > 0) or np.all(n[:, 2] < 0)  # one orientation (the cells')
+    surf = sc.fabric_surface(cells, n_nodes=len(X))
+    # closed form: a 4 x 2 grid of 9-node cells has 9 x 5 nodes and 8 triangles per cell
+    assert len(X) == 45 and len(surf.edges) == 45 + 64 - 1  # Euler: V - E + F = 1
+
+
+def test_closest_point_matches_the_independent_distance():
+    p, a, b, c = (RNG.normal(size=(2000, 3)) for _ in range(4))
+    q, w = sc.closest_point_triangle(p, a, b, c)
+    np.testing.assert_allclose(w.sum(axis=1), 1.0, atol=1e-12)
+    assert w.min() >= -1e-12
+    np.testing.assert_allclose(q, w[:, :1] * a + w[:, 1:2] * b + w[:, 2:] * c, atol=1e-12)
+    dist = np.linalg.norm(p - q, axis=1)
+    np.testing.assert_allclose(dist, ix.point_triangle_distance(p, a, b, c), atol=1e-12)
+
+
+def test_segment_distance_matches_the_independent_one():
+    p1, p2, q1, q2 = (RNG.normal(size=(2000, 3)) for _ in range(4))
+    s, t, dist = sc.segment_closest(p1, p2, q1, q2)
+    assert s.min() >= 0 and s.max() <= 1 and t.min() >= 0 and t.max() <= 1
+    np.testing.assert_allclose(dist, ix.segments_distance(p1, p2, q1, q2), atol=1e-12)
+
+
+def test_smooth_surfaces_never_contact_themselves():
+    """A flat strip and a tube have no candidate pairs at the thickness (the excluded cell
+    ring covers everything closer than half a cell)."""
+    for sm in (
+        meshes.strip(MPI.COMM_SELF, length=0.1, width=0.05, nx=10, ny=5),
+        meshes.cylinder(MPI.COMM_SELF, radius=0.06, length=0.1, n_around=16, n_along=4),
+    ):
+        X, cells = sc.mesh_nodes(sm.mesh)
+        surf = sc.fabric_surface(cells, n_nodes=len(X))
+        c = sc.build_candidates(X, surf, distance=1e-3, skin=1e-3)
+        assert len(c.pt_node) == 0 and len(c.ee) == 0
+
+
+def test_near_pairs_are_the_cell_ring(strip):
+    X, cells = strip
+    surf = sc.fabric_surface(cells, n_nodes=len(X))
+    a, b = np.meshgrid(np.arange(len(X)), np.arange(len(X)), indexing="ij")
+    near = sc.near_pairs(surf, a.ravel(), b.ravel()).reshape(a.shape)
+    share = np.zeros_like(near)
+    for c in cells:
+        share[np.ix_(c, c)] = True
+    np.testing.assert_array_equal(near, share)
+    two = sc.fabric_surface(cells, n_nodes=len(X), rings=2)
+    assert two.near_keys.size > surf.near_keys.size
+
+
+def test_unit_roots_of_a_cubic():
+    roots = np.array([0.1, 0.45, 0.8])
+    co = np.polynomial.polynomial.polyfromroots(roots)[None, :] * 3.0
+    got = sc._unit_roots(co)
+    np.testing.assert_allclose(np.sort(got[0]), roots, atol=1e-12)
+    none = sc._unit_roots(np.array([[1.0, 0.0, 1.0, 0.0]]))  # 1 + t^2 > 0
+    assert np.isnan(none).all()
+
+
+def test_crossing_detection():
+    """A point through a triangle and an edge through an edge are found; a parallel pass
+    at 1 mm is not."""
+    x0 = np.array([[0.2, 0.2, 1.0], [0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=float)
+    x1 = x0.copy()
+    x1[0, 2] = -1.0
+    surf = sc.FabricSurface(
+        np.array([[1, 2, 3]]), np.zeros(1, int), np.array([[0, 1], [2, 3]]), 4,
+        np.zeros(0, np.int64), 1,
+    )  # fmt: skip
+    args = (surf, np.array([0]), np.array([0]), 1e-9)
+    assert sc.point_triangle_crossings(x0, x1, *args)[0]
+    x1[0, 2] = 1e-3
+    assert not sc.point_triangle_crossings(x0, x1, *args)[0]
+    e0 = np.array([[0.5, -1, 1], [0.5, 1, 1], [0, 0, 0], [1, 0, 0]], dtype=float)
+    e1 = e0.copy()
+    e1[:2, 2] = -1
+    ee = np.array([[0, 1]])
+    assert sc.edge_edge_crossings(e0, e1, surf, ee, 1e-9)[0]
+    e1[:2, 2] = 1e-3
+    assert not sc.edge_edge_crossings(e0, e1, surf, ee, 1e-9)[0]
+
+
+def test_single_pair_projection_is_eq_25():
+    """One node over a triangle (masses m, 2m, 3m, 4m): the projection moves the pair to the
+    distance d with the multiplier m_eff (d - gap) of Eq. 25 and conserves momentum."""
+    x = np.array([[0.25, 0.25, 0.0004], [0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=float)
+    surf = sc.FabricSurface(
+        np.array([[1, 2, 3]]), np.zeros(1, int), np.array([[1, 2]]), 4, np.zeros(0, np.int64), 1
+    )
+    c = sc.pair_contacts(x, x, surf, np.array([0]), np.array([0]))
+    np.testing.assert_allclose(c.gap, [0.0004])
+    np.testing.assert_allclose(c.normal, [[0, 0, 1]])
+    m = np.array([1.0, 2.0, 3.0, 4.0])
+    xn, lam = sc.project_positions(x, c, 1 / m, distance=1e-3, passes=5, tol=1e-15)
+    w = -c.coef[0, 1:]
+    m_eff = 1 / (1 / m[0] + np.sum(w**2 / m[1:]))
+    np.testing.assert_allclose(lam, [m_eff * 6e-4], rtol=1e-12)
+    gap = np.einsum("j,jk->k", c.coef[0], xn[c.idx[0]]) @ c.normal[0]  # normal and w held
+    np.testing.assert_allclose(gap, 1e-3, rtol=1e-12)
+    np.testing.assert_allclose((m[:, None] * (xn - x)).sum(axis=0), 0.0, atol=1e-18)
+
+
+def test_side_follows_the_start_of_the_step():
+    """A node that passed through the face in the step gets a negative gap."""
+    x0 = np.array([[0.25, 0.25, 0.001], [0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=float)
+    x = x0.copy()
+    x[0, 2] = -0.0005
+    surf = sc.FabricSurface(
+        np.array([[1, 2, 3]]), np.zeros(1, int), np.array([[1, 2]]), 4, np.zeros(0, np.int64), 1
+    )
+    c = sc.pair_contacts(x0, x, surf, np.array([0]), np.array([0]))
+    np.testing.assert_allclose(c.gap, [-0.0005])
+    np.testing.assert_allclose(c.normal, [[0, 0, 1]])
+
+
+def test_intersections_of_crossing_and_separate_triangles():
+    x = np.array(
+        [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, -0.5], [0.2, 0.2, 0.5], [0.8, 0.8, 0.5]],
+        dtype=float,
+    )
+    tri = np.array([[0, 1, 2], [3, 4, 5]])
+    assert len(ix.intersecting_pairs(x, tri)) == 1
+    x[3:, 2] += 1.0
+    assert len(ix.intersecting_pairs(x, tri)) == 0
+    np.testing.assert_allclose(ix.layer_distance(x, tri, rings=1, radius=2.0), 0.5)
+
+
+@pytest.mark.parametrize(
+    "kw, msg",
+    [
+        ({"distance": 0.0}, "distance must be > 0 m"),
+        ({"distance": 1e-3, "mu": -1.0}, "mu must be >= 0"),
+        ({"distance": 1e-3, "rings": 0}, "rings must be an integer >= 1"),
+        ({"distance": 1e-3, "skin": -1.0}, "skin must be None or > 0 m"),
+        ({"distance": 1e-3, "tolerance": 1.0}, "tolerance must be in \\(0, 1\\)"),
+    ],
+)
+def test_bad_parameters(kw, msg):
+    with pytest.raises(ValueError, match=msg):
+        sc.SelfContactParameters(**kw)
