@@ -40,7 +40,13 @@ from .network import (
     network_from_grid,
     network_from_mesh,
 )
-from .rule import ParticleFabric, SpringRule, buckled_force, fabric_from_material
+from .rule import (
+    ParticleFabric,
+    SpringRule,
+    buckled_force,
+    compressive_force,
+    fabric_from_material,
+)
 
 __all__ = [
     "FLEXION",
@@ -58,6 +64,7 @@ __all__ = [
     "accelerations",
     "bodies",
     "buckled_force",
+    "compressive_force",
     "energies",
     "fabric_from_material",
     "grid_cells",

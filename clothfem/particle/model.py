@@ -4,8 +4,9 @@ Forces (vectorised NumPy over springs). Spring s from node i to j, ``n = (x_j - 
 the axial force ``T`` (tension > 0) acts as ``+T n`` on i and ``-T n`` on j,
 
 * linear spring: ``T = k (L - L0)``;
-* Choi & Ko (2002) spring in compression: ``T = -min(k (L0 - L), f_b(L))`` (buckled
-  column, :func:`clothfem.particle.rule.buckled_force`); a spring without tension (Choi &
+* Choi & Ko (2002) spring in compression: ``T = -P``, the smooth minimum of ``k (L0 - L)``
+  and the buckled column's ``f_b(L)`` (:func:`clothfem.particle.rule.compressive_force`);
+  a spring without tension (Choi &
   Ko flexion) has ``T = 0`` for ``L > L0``;
 * axial damping ``T += beta k (v_j - v_i) . n`` (stiffness-proportional along the spring
   axis: removes stretching vibrations, not rigid motions);
@@ -24,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import sparse
 
 from .network import KIND_NAMES, SpringNetwork
-from .rule import ParticleFabric, buckled_force, column_energy
+from .rule import ParticleFabric, column_energy, compressive_force
 
 __all__ = [
     "Damping",
@@ -189,10 +190,8 @@ def _axial(model: ParticleModel, x: FloatArray) -> tuple[FloatArray, ...]:
     T[slack], dT[slack] = 0.0, 0.0
     b = np.flatnonzero(fab.buckling & (L < L0))
     if b.size:
-        fb, dfb = buckled_force(L[b], L0[b], fab.rigidity[b])
-        column = fb < -T[b]
-        T[b[column]] = -fb[column]
-        dT[b[column]] = -dfb[column]
+        P, dP = compressive_force(L[b], L0[b], k[b], fab.rigidity[b])
+        T[b], dT[b] = -P, -dP
     return L, n, T, dT
 
 

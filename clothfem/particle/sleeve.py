@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from mpi4py import MPI
@@ -33,7 +33,9 @@ MATERIALS = {  # clothfem.scene presets
 class SagResult:
     """Vertical displacements [m] at the cuff (x = L): mean over the cuff ring, its top
     (z = +R) and bottom (z = -R) nodes; the cuff's change of vertical diameter [m]
-    (ovalisation); nodes; wall time [s]. :meth:`row` prints them in micrometres."""
+    (ovalisation); nodes; wall time [s]; the largest out-of-balance nodal force of the
+    particle solution over the largest nodal weight (NaN for the shell, converged by SNES).
+    :meth:`row` prints the displacements in micrometres."""
 
     model: str
     mesh: str
@@ -43,12 +45,12 @@ class SagResult:
     ovalisation: float
     nodes: int
     seconds: float
+    imbalance: float = float("nan")
 
     def row(self) -> str:
         um = [f"{1e6 * v:.1f}" for v in (self.mean, self.top, self.bottom, self.ovalisation)]
-        return (
-            f"| {self.model} | {self.mesh} | {self.nodes} | {' | '.join(um)} | {self.seconds:.1f} |"
-        )
+        tail = f"{self.seconds:.1f} | {self.imbalance:.1e}"
+        return f"| {self.model} | {self.mesh} | {self.nodes} | {' | '.join(um)} | {tail} |"
 
 
 def _material(name: str):
@@ -97,8 +99,6 @@ def _fabric(n_around: int, n_along: int, material: str, bending: str):
 def _transfer(fab, net, src) -> object:
     """``fab`` with each spring class's stiffness replaced by the median of that class on
     the network and fabric ``src`` (springs kept from another mesh, masses by area)."""
-    from dataclasses import replace
-
     snet, sfab = src
     k = fab.stiffness.copy()
     cls, scls = _classes(net), _classes(snet)
@@ -114,10 +114,12 @@ def particle_sag(
     material: str,
     bending: str = "provot",
     constants_from: tuple[int, int] | None = None,
+    load: float = 1.0,
 ) -> SagResult:
     """Static sag of the particle sleeve (every rank computes the whole network).
     ``constants_from``: (n_around, n_along) of a mesh whose spring constants (median of each
-    kind and orientation) are kept instead of the rule's values for this mesh."""
+    kind and orientation) are kept instead of the rule's values for this mesh; ``load``:
+    fraction of gravity."""
     from clothfem import particle as pm
 
     t0 = time.perf_counter()
@@ -126,14 +128,18 @@ def particle_sag(
     if constants_from is not None:
         fab = _transfer(fab, net, _fabric(*constants_from, material, bending))
         name = f"particle ({bending}, k of {constants_from[0]}x{constants_from[1]})"
-    model = pm.ParticleModel(network=net, fabric=fab, fixed=net.nodes("shoulder"))
+    g = (0.0, 0.0, -9.81 * load)
+    model = pm.ParticleModel(network=net, fabric=fab, fixed=net.nodes("shoulder"), gravity=g)
     state, _ = pm.solve_static(model)
     uz = state.x[:, 2] - net.x0[:, 2]
-    return _cuff(net.x0, uz, name, f"{n_around}x{n_along}", net.n_nodes, time.perf_counter() - t0)
+    res = _cuff(net.x0, uz, name, f"{n_around}x{n_along}", net.n_nodes, time.perf_counter() - t0)
+    imbalance = np.abs(state.a * fab.mass[:, None]).max() / (fab.mass.max() * 9.81 * load)
+    return replace(res, imbalance=float(imbalance))
 
 
-def shell_sag(*, n_around: int, n_along: int, material: str) -> SagResult:
-    """Static sag of the shell sleeve, clamped at the shoulder (collective)."""
+def shell_sag(*, n_around: int, n_along: int, material: str, load: float = 1.0) -> SagResult:
+    """Static sag of the shell sleeve, clamped at the shoulder, at the load factor ``load``
+    of gravity (collective)."""
     from clothfem.shell import ShellModel
     from clothfem.shell.conditions import Clamp, Gravity
     from clothfem.static import solve_static
@@ -143,7 +149,7 @@ def shell_sag(*, n_around: int, n_along: int, material: str) -> SagResult:
         _surface(n_around, n_along), material=_material(material), thickness=THICKNESS,
         loads=[Gravity()], supports=[Clamp("shoulder")],
     )  # fmt: skip
-    solve_static(model)
+    solve_static(model, targets=np.array([load]))
     comm = model.comm
     n = model.n_owned
     x0 = np.concatenate(comm.allgather(model.x_nodes[:n]))
@@ -157,6 +163,7 @@ def main() -> None:
     parser.add_argument("--shell", action="store_true", help="also solve the shell")
     parser.add_argument("--bending", nargs="+", default=["provot", "choi-ko"])
     parser.add_argument("--constants-from", default=None, help="NAROUNDxNALONG: keep its k")
+    parser.add_argument("--load", type=float, default=1.0, help="fraction of gravity")
     parser.add_argument("--material", default="decrimped-cotton", choices=sorted(MATERIALS))
     args = parser.parse_args()
     rows = []
@@ -172,11 +179,12 @@ def main() -> None:
                     material=args.material,
                     bending=b,
                     constants_from=src,
+                    load=args.load,
                 )  # fmt: skip
             )
             _print(rows[-1].row())
         if args.shell:
-            rows.append(shell_sag(n_around=na, n_along=nl, material=args.material))
+            rows.append(shell_sag(n_around=na, n_along=nl, material=args.material, load=args.load))
             _print(rows[-1].row())
 
 
