@@ -1217,6 +1217,7 @@ def integrate_explicit(
     recheck_every: int = 0,
     clock: tuple[float, int, float, int] | None = None,
     measure: Callable[[int, float], bool] | None = None,
+    work: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[list[DynamicStep], StableStep]:
     """Central difference (velocity Verlet) with the lumped mass, fixed step (or shrinking
     with the state's stable step, ``recheck_every``).
@@ -1247,7 +1248,9 @@ def integrate_explicit(
 
     Restart: ``first_step`` k > 0 continues a run of the same ``t_end`` and ``dt`` from the
     end of its step k (t = k h), the model holding that state, with its ``velocity`` and
-    ``acceleration``; energies and work are then counted from there. After the step has
+    ``acceleration``; energies and work are then counted from there, the external and
+    damping work from ``work`` = (external_work, damping_work) of step k's record (a resumed
+    run then repeats the uninterrupted one's records bit for bit). After the step has
     shrunk, also give ``clock`` = the ``clock`` of step k's record: the run continues with
     the same steps and times (``dt`` is then not used). ``on_state(record, v,
     a)`` sees the velocity and acceleration after every step (e.g. to checkpoint them).
@@ -1341,6 +1344,7 @@ def integrate_explicit(
     if acceleration is not None:
         acceleration.copy(a)
     energy = _Energy(s, x, v, a, lam, damping, K0, lumped=True)
+    energy.W_ext, energy.W_damp = (float(w) for w in work)
     r, fe = energy.r, energy.fe  # accel() fills them: no second assembly per step
     energy.ready = True
     s.commit(x)
