@@ -464,6 +464,24 @@ SCHEMA: dict[str, Section] = {
                 default=20,
                 lo=1,
             ),
+            "self_contact": Key(
+                "bool",
+                "explicit: fabric-fabric contact (clothfem.contact.self_contact: proximity "
+                "corrections after FILM, Coulomb friction between layers, a crossing "
+                "fail-safe); false builds nothing of it",
+                default=False,
+            ),
+            "self_mu": Key(
+                "float",
+                "Coulomb coefficient between fabric layers (default: contact.mu)",
+                lo=0.0,
+            ),
+            "self_distance": Key(
+                "float",
+                "contact distance between mid-surfaces [m] (default: material.thickness)",
+                lo=0.0,
+                open_lo=True,
+            ),
         },
         "contact of the fabric with the body (only built with a [[body]])",
         optional=True,
@@ -667,6 +685,8 @@ def _validate_body(data: dict[str, Any], out: dict[str, Any]) -> None:
             f"must be {'film' if film else 'lagrange'!r} with solver.integrator = "
             f"{out['solver']['integrator']!r}, got {c['method']!r}",
         )
+    if c["self_contact"] and not film:
+        _fail("contact.self_contact", "needs solver.integrator = 'explicit' (implicit: not yet)")
     hinges = [seg["name"] for seg in body if seg["type"] == "hinge"]
     if c["torque_segment"] is not None and c["torque_segment"] not in hinges:
         _fail(

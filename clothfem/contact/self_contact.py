@@ -209,7 +209,8 @@ class CandidateList:
     """Pairs that can come within the contact distance (point-triangle) or cross (edge-edge)
     while every node stays within ``skin / 2`` [m] of ``x_build`` (a Verlet list): the node
     ``pt_node`` against triangle ``pt_tri`` at distance ``pt_dist`` [m] at build, and edges
-    ``ee[:, 0]``, ``ee[:, 1]`` (rows of the surface's edges) at ``ee_dist`` [m]."""
+    ``ee[:, 0]``, ``ee[:, 1]`` (rows of the surface's edges) at ``ee_dist`` [m]; the
+    nodes of each pair in ``pt_nodes`` and ``ee_nodes``."""
 
     x_build: FloatArray
     skin: float
@@ -218,6 +219,8 @@ class CandidateList:
     pt_dist: FloatArray
     ee: IntArray
     ee_dist: FloatArray
+    pt_nodes: IntArray  # (M, 4) the node and the triangle's nodes of each pair
+    ee_nodes: IntArray  # (K, 4) the nodes of both edges of each pair
 
     def valid(self, *xs: FloatArray) -> bool:
         """Whether every node of every configuration ``xs`` is within skin / 2 of the build."""
@@ -229,47 +232,45 @@ def _moved(x: FloatArray, x_ref: FloatArray) -> FloatArray:
     return np.sqrt(np.einsum("ij,ij->i", x - x_ref, x - x_ref))
 
 
-def _ragged(lists) -> tuple[IntArray, IntArray]:
-    """Row and column indices of a sequence of index lists (query_ball_point output)."""
-    counts = np.fromiter((len(r) for r in lists), dtype=np.intp, count=len(lists))
-    cols = np.fromiter((j for r in lists for j in r), dtype=np.intp, count=int(counts.sum()))
-    return np.repeat(np.arange(len(lists)), counts), cols
+def _far(surface: FabricSurface, a: IntArray, b: IntArray) -> NDArray[np.bool_]:
+    """Rows where no node of ``a`` (M, i) is near a node of ``b`` (M, j)."""
+    far = np.ones(len(a), dtype=bool)
+    for i in range(a.shape[1]):
+        for j in range(b.shape[1]):
+            far &= ~near_pairs(surface, a[:, i], b[:, j])
+    return far
 
 
 def build_candidates(
     x: FloatArray, surface: FabricSurface, *, distance: float, skin: float
 ) -> CandidateList:
     """Candidate pairs at positions ``x`` (N, 3): point-triangle and edge-edge pairs closer
-    than ``distance + skin`` (exact distances after a cKDTree query on triangle centroids /
-    edge midpoints), near pairs excluded."""
+    than ``distance + skin`` [m] and not near. Broad phase: cKDTree queries (nodes against
+    triangle centroids, edge midpoints against each other); then exact distances; the
+    neighbour exclusion last (on the few pairs left)."""
     tri, edges = surface.triangles, surface.edges
+    reach = distance + skin
     xt = x[tri]
     cen = xt.mean(axis=1)
     rad = float(np.max(np.linalg.norm(xt - cen[:, None], axis=2), initial=0.0))
-    reach = distance + skin
-    node, t = _ragged(cKDTree(cen).query_ball_point(x, reach + rad))
-    far = ~(near_pairs(surface, node, tri[t, 0]) | near_pairs(surface, node, tri[t, 1]))
-    far &= ~near_pairs(surface, node, tri[t, 2])
-    node, t = node[far], t[far]
+    hits = cKDTree(x).sparse_distance_matrix(cKDTree(cen), reach + rad, output_type="ndarray")
+    node, t = hits["i"].astype(np.intp), hits["j"].astype(np.intp)
     q, _ = closest_point_triangle(x[node], *(x[tri[t, k]] for k in range(3)))
     dist = np.linalg.norm(x[node] - q, axis=1)
-    keep = dist < reach
+    keep = np.flatnonzero(dist < reach)
+    keep = keep[_far(surface, node[keep, None], tri[t[keep]])]
     xe = x[edges]
     mid = xe.mean(axis=1)
-    half = float(np.max(np.linalg.norm(xe[:, 0] - xe[:, 1], axis=1), initial=0.0))
-    ee = cKDTree(mid).query_pairs(reach + half, output_type="ndarray").astype(np.intp)
-    e0, e1 = edges[ee[:, 0]], edges[ee[:, 1]]
-    far = np.ones(len(ee), dtype=bool)
-    for i in range(2):
-        for j in range(2):
-            far &= ~near_pairs(surface, e0[:, i], e1[:, j])
-    ee = ee[far]
+    length = float(np.max(np.linalg.norm(xe[:, 0] - xe[:, 1], axis=1), initial=0.0))
+    ee = cKDTree(mid).query_pairs(reach + length, output_type="ndarray").astype(np.intp)
     e0, e1 = edges[ee[:, 0]], edges[ee[:, 1]]
     ed = segment_distance(x[e0[:, 0]], x[e0[:, 1]], x[e1[:, 0]], x[e1[:, 1]])
-    close = ed < reach
+    close = np.flatnonzero(ed < reach)
+    close = close[_far(surface, e0[close], e1[close])]
     return CandidateList(
-        x.copy(), float(skin), node[keep], t[keep], dist[keep], ee[close], ed[close]
-    )
+        x.copy(), float(skin), node[keep], t[keep], dist[keep], ee[close], ed[close],
+        np.column_stack([node[keep], tri[t[keep]]]), edges[ee[close]].reshape(-1, 4),
+    )  # fmt: skip
 
 
 # --------------------------------------------------------------------------- narrow phase
@@ -402,7 +403,108 @@ def _accelerated(
     return y, P
 
 
-def _normal_solve(y0, c: PairContacts, inv_m, target: float, passes: int, tol: float):
+def _gs_normal(idx, coef, normal, inv_m, y, target, passes, tol, J):  # pragma: no cover
+    """Projected Gauss-Seidel over the pairs in order (numba): ``J >= 0`` with relative
+    normal value ``>= target`` (``y`` and ``J`` in place); returns the sweeps used."""
+    m = idx.shape[0]
+    w = np.zeros(m)
+    for c in range(m):
+        for k in range(4):
+            w[c] += coef[c, k] * coef[c, k] * inv_m[idx[c, k]]
+    for it in range(passes):
+        change = 0.0
+        for c in range(m):
+            if w[c] <= 0.0:
+                continue
+            rn = 0.0
+            for k in range(4):
+                for j in range(3):
+                    rn += coef[c, k] * y[idx[c, k], j] * normal[c, j]
+            new = max(0.0, J[c] - (rn - target) / w[c])
+            dj = new - J[c]
+            J[c] = new
+            for k in range(4):
+                s = inv_m[idx[c, k]] * coef[c, k] * dj
+                for j in range(3):
+                    y[idx[c, k], j] += s * normal[c, j]
+            change = max(change, abs(dj) * w[c])
+        if change <= tol:
+            return it + 1
+    return passes
+
+
+def _gs_friction(idx, coef, normal, inv_m, y, lim, passes, tol, Jt):  # pragma: no cover
+    """Projected Gauss-Seidel (numba) on tangential impulses ``|Jt| <= lim`` that stop the
+    tangential relative velocity (``y`` and ``Jt`` in place); returns the sweeps used."""
+    m = idx.shape[0]
+    w = np.zeros(m)
+    for c in range(m):
+        for k in range(4):
+            w[c] += coef[c, k] * coef[c, k] * inv_m[idx[c, k]]
+    r, t = np.zeros(3), np.zeros(3)
+    for it in range(passes):
+        change = 0.0
+        for c in range(m):
+            if w[c] <= 0.0 or lim[c] <= 0.0:
+                continue
+            for j in range(3):
+                r[j] = 0.0
+                for k in range(4):
+                    r[j] += coef[c, k] * y[idx[c, k], j]
+            rn, tn = 0.0, 0.0
+            for j in range(3):
+                rn += r[j] * normal[c, j]
+                tn += Jt[c, j] * normal[c, j]
+            mag = 0.0
+            for j in range(3):
+                t[j] = Jt[c, j] - tn * normal[c, j] - (r[j] - rn * normal[c, j]) / w[c]
+                mag += t[j] * t[j]
+            mag = np.sqrt(mag)
+            scale = lim[c] / mag if mag > lim[c] else 1.0
+            dmax = 0.0
+            for j in range(3):
+                dj = t[j] * scale - Jt[c, j]
+                Jt[c, j] += dj
+                dmax = max(dmax, abs(dj))
+                for k in range(4):
+                    y[idx[c, k], j] += inv_m[idx[c, k]] * coef[c, k] * dj
+            change = max(change, dmax * w[c])
+        if change <= tol:
+            return it + 1
+    return passes
+
+
+try:  # the Gauss-Seidel kernels compiled by numba (Debian's python3-numba), else NumPy
+    from numba import njit
+
+    _gs_normal = njit(cache=True)(_gs_normal)
+    _gs_friction = njit(cache=True)(_gs_friction)
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover
+    HAVE_NUMBA = False
+
+
+def _use_numba(kernel: str) -> bool:
+    if kernel not in ("auto", "numba", "numpy"):
+        raise ValueError(f"kernel must be 'auto', 'numba' or 'numpy', got {kernel!r}")
+    if kernel == "numba" and not HAVE_NUMBA:
+        raise ValueError("kernel 'numba' needs numba (python3-numba); use 'auto' or 'numpy'")
+    return kernel != "numpy" and HAVE_NUMBA
+
+
+def _arrays(c: PairContacts):
+    return (
+        np.ascontiguousarray(c.idx, dtype=np.int64),
+        np.ascontiguousarray(c.coef, dtype=float),
+        np.ascontiguousarray(c.normal, dtype=float),
+    )
+
+
+def _normal_solve(y0, c: PairContacts, inv_m, target, passes, tol, kernel="auto"):
+    if _use_numba(kernel):
+        y, J = np.array(y0, dtype=float), np.zeros(len(c.gap))
+        _gs_normal(*_arrays(c), np.ascontiguousarray(inv_m), y, target, passes, tol, J)
+        return y, J
     n = c.normal
 
     def residual(y):
@@ -423,20 +525,27 @@ def project_positions(
     distance: float,
     passes: int,
     tol: float,
+    kernel: str = "auto",
 ) -> tuple[FloatArray, FloatArray]:
     """Mass-weighted projection of the pairs to ``gap >= distance`` (normals and weights held):
     corrected positions and the position multipliers ``m_eff dgap`` (M,) [kg m] (FILM's
     ``lambda dt^2``, Eq. 25 for one pair). ``tol`` [m]: convergence of the gaps."""
-    return _normal_solve(x, c, inv_m, distance, passes, tol)
+    return _normal_solve(x, c, inv_m, distance, passes, tol, kernel)
 
 
 def normal_impulses(
-    v: FloatArray, c: PairContacts, inv_m: FloatArray, *, passes: int, tol: float
+    v: FloatArray,
+    c: PairContacts,
+    inv_m: FloatArray,
+    *,
+    passes: int,
+    tol: float,
+    kernel: str = "auto",
 ) -> tuple[FloatArray, FloatArray]:
     """Inelastic normal impulses ``J >= 0`` (M,) [N s] that stop every pair's approach (zero
     relative normal velocity where ``J > 0``, none approaching; ``tol`` [m/s]): the new
     velocities and ``J``."""
-    return _normal_solve(v, c, inv_m, 0.0, passes, tol)
+    return _normal_solve(v, c, inv_m, 0.0, passes, tol, kernel)
 
 
 def friction_impulses(
@@ -448,11 +557,16 @@ def friction_impulses(
     mu: float,
     passes: int,
     tol: float,
+    kernel: str = "auto",
 ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
     """Coulomb friction on impulses: tangential impulses ``|Jt| <= mu Jn`` (M, 3) [N s] that
     bring the tangential relative velocity to zero where the limit allows (stick), else
     ``|Jt| = mu Jn`` against it (slip). Returns the new velocities, ``Jt``, the stick mask."""
-    n, lim = c.normal, mu * np.asarray(Jn)
+    n, lim = c.normal, mu * np.asarray(Jn, dtype=float)
+    if _use_numba(kernel):
+        v, Jt = np.array(v, dtype=float), np.zeros((len(lim), 3))
+        _gs_friction(*_arrays(c), np.ascontiguousarray(inv_m), v, lim, passes, tol, Jt)
+        return v, Jt, np.linalg.norm(Jt, axis=1) < lim * (1.0 - 1e-9)
 
     def residual(y):
         r = _relative(y, c.idx, c.coef)
@@ -483,9 +597,11 @@ def _poly(c: FloatArray, t: FloatArray) -> FloatArray:
     return ((c[:, 3] * t + c[:, 2]) * t + c[:, 1]) * t + c[:, 0]
 
 
-def _unit_roots(c: FloatArray, iterations: int = 60) -> FloatArray:
+def _unit_roots(c: FloatArray, iterations: int = 45) -> FloatArray:
     """The (up to 3) roots in [0, 1] of cubics (M, 4), (M, 3) with nan where none: the cubic
     is split at the roots of its derivative into monotone pieces, each bisected."""
+    if len(c) == 0:
+        return np.full((0, 3), np.nan)
     a, b, cc = 3 * c[:, 3], 2 * c[:, 2], c[:, 1]
     with np.errstate(invalid="ignore", divide="ignore"):
         disc = np.sqrt(b * b - 4 * a * cc)
@@ -496,16 +612,18 @@ def _unit_roots(c: FloatArray, iterations: int = 60) -> FloatArray:
     knots = np.column_stack([np.zeros(len(c)), crit, np.ones(len(c))])
     out = np.full((len(c), 3), np.nan)
     for k in range(3):
-        lo, hi = knots[:, k].copy(), knots[:, k + 1].copy()
-        flo, fhi = _poly(c, lo), _poly(c, hi)
-        has = (flo * fhi <= 0) & (hi >= lo)
+        lo, hi = knots[:, k], knots[:, k + 1]
+        has = np.flatnonzero((_poly(c, lo) * _poly(c, hi) <= 0) & (hi >= lo))
+        if has.size == 0:
+            continue
+        ck, lo, hi = c[has], lo[has].copy(), hi[has].copy()
+        flo = _poly(ck, lo)
         for _ in range(iterations):
             mid = 0.5 * (lo + hi)
-            fm = _poly(c, mid)
+            fm = _poly(ck, mid)
             left = (flo * fm) <= 0
-            hi, lo = np.where(left, mid, hi), np.where(left, lo, mid)
-            flo = np.where(left, flo, fm)
-        out[has, k] = 0.5 * (lo + hi)[has]
+            hi, lo, flo = np.where(left, mid, hi), np.where(left, lo, mid), np.where(left, flo, fm)
+        out[has, k] = 0.5 * (lo + hi)
     return out
 
 
@@ -559,23 +677,30 @@ def edge_edge_crossings(
     return hit
 
 
-def _pair_motion(cands: CandidateList, x0: FloatArray, x1: FloatArray, nodes: IntArray):
-    """Largest distance from the build of the nodes of each pair (rows of ``nodes``) at the
-    step's ends (and so along it): a pair's distance changes by at most twice that."""
+def _crossings(cands: CandidateList, surface, x0, x1, eps) -> tuple[IntArray, IntArray]:
+    """Node groups (rows of 4) of the point-triangle and edge-edge pairs that cross. Two
+    filters before the cubic: the build distance less twice the largest motion of the
+    pair's nodes from the build (at either end of the step, so along it), then the distance
+    at ``x1`` less the pair's motion over the step (a pair's distance changes by at most the
+    largest displacement of one side plus that of the other)."""
     moved = np.maximum(_moved(x0, cands.x_build), _moved(x1, cands.x_build))
-    return moved[nodes].max(axis=1)
-
-
-def _crossings(cands, surface, x0, x1, eps) -> tuple[IntArray, IntArray]:
-    """Node groups (rows of 4) of the point-triangle and edge-edge pairs that cross."""
-    tri = surface.triangles[cands.pt_tri]
-    g_pt = np.column_stack([cands.pt_node, tri])
-    g_ee = np.column_stack([surface.edges[cands.ee[:, 0]], surface.edges[cands.ee[:, 1]]])
-    s_pt = np.flatnonzero(cands.pt_dist - 2 * _pair_motion(cands, x0, x1, g_pt) <= eps)
-    s_ee = np.flatnonzero(cands.ee_dist - 2 * _pair_motion(cands, x0, x1, g_ee) <= eps)
+    step = _moved(x1, x0)
+    out = []
+    for g, dist0, split in ((cands.pt_nodes, cands.pt_dist, 1), (cands.ee_nodes, cands.ee_dist, 2)):
+        s = np.flatnonzero(dist0 - 2 * moved[g].max(axis=1) <= eps)
+        if s.size:
+            gs = g[s]
+            if split == 1:
+                q, _ = closest_point_triangle(*(x1[gs[:, k]] for k in range(4)))
+                dist = np.linalg.norm(x1[gs[:, 0]] - q, axis=1)
+            else:
+                dist = segment_distance(*(x1[gs[:, k]] for k in range(4)))
+            s = s[dist <= step[gs[:, :split]].max(1) + step[gs[:, split:]].max(1) + eps]
+        out.append(s)
+    s_pt, s_ee = out
     h_pt = point_triangle_crossings(x0, x1, surface, cands.pt_node[s_pt], cands.pt_tri[s_pt], eps)
     h_ee = edge_edge_crossings(x0, x1, surface, cands.ee[s_ee], eps)
-    return g_pt[s_pt[h_pt]], g_ee[s_ee[h_ee]]
+    return cands.pt_nodes[s_pt[h_pt]], cands.ee_nodes[s_ee[h_ee]]
 
 
 def _impact_zones(
@@ -619,7 +744,9 @@ class SelfContactParameters:
     a node excluded from its contacts (>= 1); skin: Verlet-list skin [m] (> 0; default d /
     2); passes: Jacobi passes of each response stage (>= 1); tolerance: allowed gap
     deficit, fraction of d (0 < tol < 1); failsafe_passes: crossing checks and impact-zone
-    merges per step (>= 1); eps: crossing proximity, fraction of d (0 < eps < 1)."""
+    merges per step (>= 1); eps: crossing proximity, fraction of d (0 < eps < 1); kernel:
+    the response solver, "numba" (projected Gauss-Seidel over the pairs, compiled), "numpy"
+    (accelerated projected Jacobi, vectorised) or "auto" (numba when importable)."""
 
     distance: float
     mu: float = 0.0
@@ -629,6 +756,7 @@ class SelfContactParameters:
     tolerance: float = 0.01
     failsafe_passes: int = 8
     eps: float = 1e-3
+    kernel: str = "auto"
 
     def __post_init__(self) -> None:
         def bad(name, value, rule):
@@ -648,6 +776,8 @@ class SelfContactParameters:
             val = getattr(self, name)
             if not (0 < val < 1):
                 bad(name, val, "in (0, 1)")
+        if self.kernel not in ("auto", "numba", "numpy"):
+            bad("kernel", self.kernel, "'auto', 'numba' or 'numpy'")
 
     @property
     def skin_length(self) -> float:
@@ -685,7 +815,7 @@ def _list_for(cands, x_now, x_other, surface, p: SelfContactParameters) -> tuple
     if cands is not None and cands.valid(x_now, x_other):
         return cands, False
     span = float(np.max(_moved(x_now, x_other), initial=0.0))
-    skin = max(p.skin_length, 2.5 * span)
+    skin = max(p.skin_length, 10.0 * span)  # valid for a few steps of this speed
     return build_candidates(x_now, surface, distance=p.distance, skin=skin), True
 
 
@@ -717,33 +847,41 @@ def self_contact_step(
     inv_m = np.where(fx, 0.0, 1.0 / m)
     d, tol = p.distance, p.tolerance * p.distance
     cands, rebuilt = _list_for(candidates, xs, x0, surface, p)
-    # pairs that can be within d now: build distance minus the motion since the build
-    g = np.column_stack([cands.pt_node, surface.triangles[cands.pt_tri]])
-    sel = np.flatnonzero(cands.pt_dist - 2 * _moved(xs, cands.x_build)[g].max(axis=1) < d)
+    c = _contacts_now(x0, xs, surface, cands, d, tol)
+    x, v = xs.copy(), vs.copy()
+    lam, jn = np.zeros(len(c.gap)), np.zeros(len(c.gap))
+    jt, stick = np.zeros((len(jn), 3)), np.ones(len(jn), dtype=bool)
+    if len(c.gap):
+        k = {"passes": p.passes, "kernel": p.kernel}
+        x, lam = project_positions(xs, c, inv_m, distance=d, tol=1e-3 * tol, **k)
+        v, jn = normal_impulses(vs, c, inv_m, tol=1e-9 * _speed(vs), **k)
+        if p.mu > 0:
+            v1, jt, stick = friction_impulses(v, c, inv_m, jn, mu=p.mu, tol=1e-9 * _speed(vs), **k)
+            x += dt * (v1 - v)
+            v = v1
+    x, v, found, left, zone, cands2 = _failsafe(x0, x, v, m, fx, surface, cands, p)
+    return SelfContactResult(
+        x, v, c, lam, jn, jt, stick,
+        float(np.max(d - c.gap, initial=0.0)),
+        float(np.min(_dot(_relative(x, c.idx, c.coef), c.normal), initial=np.inf)),
+        found, left, zone, rebuilt or cands2 is not cands, cands2,
+    )  # fmt: skip
+
+
+def _contacts_now(x0, xs, surface, cands: CandidateList, d: float, tol: float) -> PairContacts:
+    """Node-triangle and edge pairs closer than ``d + tol`` at ``xs`` (per node / first
+    edge the closest on each side), after the list's bound: build distance less twice the
+    largest motion of the pair's nodes since the build."""
+    moved = _moved(xs, cands.x_build)
+    sel = np.flatnonzero(cands.pt_dist - 2 * moved[cands.pt_nodes].max(axis=1) < d)
     c = pair_contacts(x0, xs, surface, cands.pt_node[sel], cands.pt_tri[sel])
     c = PairContacts(*(a[c.gap < d + tol] for a in c))
     c = _closest_per_key(c, c.idx[:, 0])
-    ge = surface.edges[cands.ee].reshape(-1, 4)
-    sel = np.flatnonzero(cands.ee_dist - 2 * _moved(xs, cands.x_build)[ge].max(axis=1) < d)
+    sel = np.flatnonzero(cands.ee_dist - 2 * moved[cands.ee_nodes].max(axis=1) < d)
     ce = edge_contacts(x0, xs, surface, cands.ee[sel])
     close = ce.gap < d + tol
     ce = _closest_per_key(PairContacts(*(a[close] for a in ce)), cands.ee[sel][close, 0])
-    c = PairContacts(*(np.concatenate([a, b]) for a, b in zip(c, ce, strict=True)))
-    deficit = float(np.max(d - c.gap, initial=0.0))
-    x, lam = project_positions(xs, c, inv_m, distance=d, passes=p.passes, tol=1e-3 * tol)
-    v, jn = normal_impulses(vs, c, inv_m, passes=p.passes, tol=1e-9 * _speed(vs))
-    jt, stick = np.zeros((len(jn), 3)), np.ones(len(jn), dtype=bool)
-    if p.mu > 0 and len(jn):
-        v1, jt, stick = friction_impulses(
-            v, c, inv_m, jn, mu=p.mu, passes=p.passes, tol=1e-9 * _speed(vs)
-        )
-        x += dt * (v1 - v)
-        v = v1
-    x, v, found, left, zone = _failsafe(x0, x, v, m, fx, surface, cands, p)
-    min_gap = float(np.min(_dot(_relative(x, c.idx, c.coef), c.normal), initial=np.inf))
-    return SelfContactResult(
-        x, v, c, lam, jn, jt, stick, deficit, min_gap, found, left, zone, rebuilt, cands
-    )
+    return PairContacts(*(np.concatenate([a, b]) for a, b in zip(c, ce, strict=True)))
 
 
 def _speed(v: FloatArray) -> float:
@@ -752,7 +890,8 @@ def _speed(v: FloatArray) -> float:
 
 def _failsafe(x0, x, v, m, fx, surface, cands, p: SelfContactParameters):
     """Crossing check over the step and impact zones until none is left (or the passes are
-    used up): positions, velocities, crossings of the first and last pass, zone nodes."""
+    used up): positions, velocities, crossings of the first and last pass, zone nodes, the
+    candidate list (rebuilt if a correction moved a node past half the skin)."""
     eps = p.eps * p.distance
     found, links, zone = -1, np.zeros((0, 4), dtype=np.intp), np.zeros(0, dtype=np.intp)
     for _ in range(p.failsafe_passes):
@@ -761,13 +900,13 @@ def _failsafe(x0, x, v, m, fx, surface, cands, p: SelfContactParameters):
         count = len(pt) + len(ee)
         found = count if found < 0 else found
         if count == 0:
-            return x, v, found, 0, len(zone)
+            return x, v, found, 0, len(zone), cands
         links = np.concatenate([links, pt, ee])
         x, v = x.copy(), v.copy()
         zone = _impact_zones(x0, x, v, m, fx, links)
     cands, _ = _list_for(cands, x, x0, surface, p)
     pt, ee = _crossings(cands, surface, x0, x, eps)
-    return x, v, found, len(pt) + len(ee), len(zone)
+    return x, v, found, len(pt) + len(ee), len(zone), cands
 
 
 # --------------------------------------------------------------------------- explicit runner

@@ -164,3 +164,20 @@ def test_intersections_of_crossing_and_separate_triangles():
 def test_bad_parameters(kw, msg):
     with pytest.raises(ValueError, match=msg):
         sc.SelfContactParameters(**kw)
+
+
+def test_scene_keys_build_self_contact_only_when_asked():
+    """contact.self_contact defaults to false (SelfContact.from_scene builds nothing); true
+    needs the explicit integrator; the distance defaults to the thickness, mu to contact.mu."""
+    from pathlib import Path
+
+    from clothfem import scene as scenes
+
+    path = Path(__file__).parents[2] / "demos" / "scenes" / "arm_sleeve.toml"
+    data = scenes.load(path)
+    assert data["contact"]["self_contact"] is False
+    assert sc.SelfContact.from_scene(None, data["contact"]) is None
+    on = scenes.load(path, ["contact.self_contact=true"])["contact"]
+    assert on["self_contact"] is True and on["self_distance"] is None and on["self_mu"] is None
+    with pytest.raises(scenes.SceneError, match="contact.self_contact"):
+        scenes.load(path, ["contact.self_contact=true", "solver.integrator='newmark'"])
