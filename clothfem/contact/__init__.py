@@ -15,6 +15,10 @@ The FEM-coupled implicit solver (Lagrange multipliers with active-set iterations
 friction) is :mod:`clothfem.contact.lagrange`; import it explicitly (it needs dolfinx), so that
 ``import clothfem.contact`` stays FEM-free.
 
+Fabric self-contact for the explicit integrator (proximity corrections and a crossing
+fail-safe on the triangulated fabric surface) is :mod:`clothfem.contact.self_contact`; the
+independent intersection checker is :mod:`clothfem.contact.intersections`.
+
 Ellipsoids are plain ``(c, Q, r)`` triples: centre (3,) m, axes as the columns of ``Q`` (local
 coordinates ``y = Q^T (x - c)``), radii (3,) m.
 """
@@ -52,9 +56,35 @@ from clothfem.contact.geometry import (
     implicit_value,
     radial_projection,
 )
+from clothfem.contact.intersections import (
+    SurfaceCheck,
+    check_surface,
+    intersecting_pairs,
+    layer_distance,
+)
+from clothfem.contact.self_contact import (
+    FabricSurface,
+    SelfContact,
+    SelfContactParameters,
+    SelfContactResult,
+    fabric_surface,
+    self_contact_step,
+    triangulate_q9,
+)
 
 __all__ = [
     "ContactDiagnostics",
+    "FabricSurface",
+    "SelfContact",
+    "SelfContactParameters",
+    "SelfContactResult",
+    "SurfaceCheck",
+    "check_surface",
+    "fabric_surface",
+    "intersecting_pairs",
+    "layer_distance",
+    "self_contact_step",
+    "triangulate_q9",
     "EllipsoidData",
     "FilmResult",
     "FrictionResult",

@@ -474,22 +474,32 @@ def _gs_friction(idx, coef, normal, inv_m, y, lim, passes, tol, Jt):  # pragma: 
     return passes
 
 
-try:  # the Gauss-Seidel kernels compiled by numba (Debian's python3-numba), else NumPy
-    from numba import njit
+_KERNELS: tuple = ()
+_TRIED = False
 
-    _gs_normal = njit(cache=True)(_gs_normal)
-    _gs_friction = njit(cache=True)(_gs_friction)
-    HAVE_NUMBA = True
-except ImportError:  # pragma: no cover
-    HAVE_NUMBA = False
+
+def _numba_kernels() -> tuple:
+    """The Gauss-Seidel kernels compiled by numba (Debian's python3-numba) on first use, or
+    () without numba (then the NumPy solver runs)."""
+    global _KERNELS, _TRIED
+    if not _TRIED:
+        _TRIED = True
+        try:
+            from numba import njit
+        except ImportError:  # pragma: no cover
+            return _KERNELS
+        _KERNELS = (njit(cache=True)(_gs_normal), njit(cache=True)(_gs_friction))
+    return _KERNELS
 
 
 def _use_numba(kernel: str) -> bool:
     if kernel not in ("auto", "numba", "numpy"):
         raise ValueError(f"kernel must be 'auto', 'numba' or 'numpy', got {kernel!r}")
-    if kernel == "numba" and not HAVE_NUMBA:
+    if kernel == "numpy":
+        return False
+    if kernel == "numba" and not _numba_kernels():
         raise ValueError("kernel 'numba' needs numba (python3-numba); use 'auto' or 'numpy'")
-    return kernel != "numpy" and HAVE_NUMBA
+    return bool(_numba_kernels())
 
 
 def _arrays(c: PairContacts):
@@ -503,7 +513,7 @@ def _arrays(c: PairContacts):
 def _normal_solve(y0, c: PairContacts, inv_m, target, passes, tol, kernel="auto"):
     if _use_numba(kernel):
         y, J = np.array(y0, dtype=float), np.zeros(len(c.gap))
-        _gs_normal(*_arrays(c), np.ascontiguousarray(inv_m), y, target, passes, tol, J)
+        _numba_kernels()[0](*_arrays(c), np.ascontiguousarray(inv_m), y, target, passes, tol, J)
         return y, J
     n = c.normal
 
@@ -565,7 +575,7 @@ def friction_impulses(
     n, lim = c.normal, mu * np.asarray(Jn, dtype=float)
     if _use_numba(kernel):
         v, Jt = np.array(v, dtype=float), np.zeros((len(lim), 3))
-        _gs_friction(*_arrays(c), np.ascontiguousarray(inv_m), v, lim, passes, tol, Jt)
+        _numba_kernels()[1](*_arrays(c), np.ascontiguousarray(inv_m), v, lim, passes, tol, Jt)
         return v, Jt, np.linalg.norm(Jt, axis=1) < lim * (1.0 - 1e-9)
 
     def residual(y):
