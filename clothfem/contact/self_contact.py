@@ -242,14 +242,16 @@ def _far(surface: FabricSurface, a: IntArray, b: IntArray) -> NDArray[np.bool_]:
 
 
 def build_candidates(
-    x: FloatArray, surface: FabricSurface, *, distance: float, skin: float
+    x: FloatArray, surface: FabricSurface, *, distance: float, skin: float, edges: bool = True
 ) -> CandidateList:
-    """Candidate pairs at positions ``x`` (N, 3): point-triangle and edge-edge pairs closer
-    than ``distance + skin`` [m] and not near. Broad phase: cKDTree queries (nodes against
-    triangle centroids, edge midpoints against each other); then exact distances; the
-    neighbour exclusion last (on the few pairs left)."""
-    tri, edges = surface.triangles, surface.edges
+    """Candidate pairs at positions ``x`` (N, 3): point-triangle pairs closer than
+    ``distance + skin`` [m], edge pairs closer than that (``edges``: edge-edge proximity) or
+    than ``skin`` (for the crossing check only), none near. Broad phase: cKDTree queries
+    (nodes against triangle centroids, edge midpoints against each other); then exact
+    distances; the neighbour exclusion last (on the few pairs left)."""
+    tri, edge = surface.triangles, surface.edges
     reach = distance + skin
+    e_reach = reach if edges else skin + 0.01 * distance  # > skin + 2 eps (eps < 0.005 d)
     xt = x[tri]
     cen = xt.mean(axis=1)
     rad = float(np.max(np.linalg.norm(xt - cen[:, None], axis=2), initial=0.0))
@@ -259,17 +261,17 @@ def build_candidates(
     dist = np.linalg.norm(x[node] - q, axis=1)
     keep = np.flatnonzero(dist < reach)
     keep = keep[_far(surface, node[keep, None], tri[t[keep]])]
-    xe = x[edges]
+    xe = x[edge]
     mid = xe.mean(axis=1)
     length = float(np.max(np.linalg.norm(xe[:, 0] - xe[:, 1], axis=1), initial=0.0))
-    ee = cKDTree(mid).query_pairs(reach + length, output_type="ndarray").astype(np.intp)
-    e0, e1 = edges[ee[:, 0]], edges[ee[:, 1]]
+    ee = cKDTree(mid).query_pairs(e_reach + length, output_type="ndarray").astype(np.intp)
+    e0, e1 = edge[ee[:, 0]], edge[ee[:, 1]]
     ed = segment_distance(x[e0[:, 0]], x[e0[:, 1]], x[e1[:, 0]], x[e1[:, 1]])
-    close = np.flatnonzero(ed < reach)
+    close = np.flatnonzero(ed < e_reach)
     close = close[_far(surface, e0[close], e1[close])]
     return CandidateList(
         x.copy(), float(skin), node[keep], t[keep], dist[keep], ee[close], ed[close],
-        np.column_stack([node[keep], tri[t[keep]]]), edges[ee[close]].reshape(-1, 4),
+        np.column_stack([node[keep], tri[t[keep]]]), edge[ee[close]].reshape(-1, 4),
     )  # fmt: skip
 
 
@@ -751,12 +753,14 @@ def _impact_zones(
 class SelfContactParameters:
     """distance: contact distance d [m] between mid-surfaces (> 0; the fabric thickness or a
     multiple of it); mu: Coulomb coefficient between layers (>= 0); rings: cell rings around
-    a node excluded from its contacts (>= 1); skin: Verlet-list skin [m] (> 0; default d /
-    2); passes: Jacobi passes of each response stage (>= 1); tolerance: allowed gap
+    a node excluded from its contacts (>= 1); skin: Verlet-list skin [m] (> 0; default 2
+    d); passes: sweeps / iterations of each response stage (>= 1); tolerance: allowed gap
     deficit, fraction of d (0 < tol < 1); failsafe_passes: crossing checks and impact-zone
-    merges per step (>= 1); eps: crossing proximity, fraction of d (0 < eps < 1); kernel:
+    merges per step (>= 1); eps: crossing proximity, fraction of d (0 < eps < 0.005); kernel:
     the response solver, "numba" (projected Gauss-Seidel over the pairs, compiled), "numpy"
-    (accelerated projected Jacobi, vectorised) or "auto" (numba when importable)."""
+    (accelerated projected Jacobi, vectorised) or "auto" (numba when importable);
+    edge_proximity: edge-edge pairs closer than d are corrected too (else node-triangle
+    pairs only; edges then enter the crossing check alone)."""
 
     distance: float
     mu: float = 0.0
@@ -767,6 +771,7 @@ class SelfContactParameters:
     failsafe_passes: int = 8
     eps: float = 1e-3
     kernel: str = "auto"
+    edge_proximity: bool = True
 
     def __post_init__(self) -> None:
         def bad(name, value, rule):
@@ -782,16 +787,16 @@ class SelfContactParameters:
             val = getattr(self, name)
             if int(val) != val or val < 1:
                 bad(name, val, "an integer >= 1")
-        for name in ("tolerance", "eps"):
-            val = getattr(self, name)
-            if not (0 < val < 1):
-                bad(name, val, "in (0, 1)")
+        if not (0 < self.tolerance < 1):
+            bad("tolerance", self.tolerance, "in (0, 1)")
+        if not (0 < self.eps < 0.005):
+            bad("eps", self.eps, "in (0, 0.005)")
         if self.kernel not in ("auto", "numba", "numpy"):
             bad("kernel", self.kernel, "'auto', 'numba' or 'numpy'")
 
     @property
     def skin_length(self) -> float:
-        return 0.5 * self.distance if self.skin is None else float(self.skin)
+        return 2.0 * self.distance if self.skin is None else float(self.skin)
 
 
 class SelfContactResult(NamedTuple):
@@ -825,8 +830,9 @@ def _list_for(cands, x_now, x_other, surface, p: SelfContactParameters) -> tuple
     if cands is not None and cands.valid(x_now, x_other):
         return cands, False
     span = float(np.max(_moved(x_now, x_other), initial=0.0))
-    skin = max(p.skin_length, 10.0 * span)  # valid for a few steps of this speed
-    return build_candidates(x_now, surface, distance=p.distance, skin=skin), True
+    skin = max(p.skin_length, 4.0 * span)  # the list outlives this step
+    c = build_candidates(x_now, surface, distance=p.distance, skin=skin, edges=p.edge_proximity)
+    return c, True
 
 
 def self_contact_step(
@@ -857,7 +863,7 @@ def self_contact_step(
     inv_m = np.where(fx, 0.0, 1.0 / m)
     d, tol = p.distance, p.tolerance * p.distance
     cands, rebuilt = _list_for(candidates, xs, x0, surface, p)
-    c = _contacts_now(x0, xs, surface, cands, d, tol)
+    c = _contacts_now(x0, xs, surface, cands, d, tol, p.edge_proximity)
     x, v = xs.copy(), vs.copy()
     lam, jn = np.zeros(len(c.gap)), np.zeros(len(c.gap))
     jt, stick = np.zeros((len(jn), 3)), np.ones(len(jn), dtype=bool)
@@ -878,7 +884,7 @@ def self_contact_step(
     )  # fmt: skip
 
 
-def _contacts_now(x0, xs, surface, cands: CandidateList, d: float, tol: float) -> PairContacts:
+def _contacts_now(x0, xs, surface, cands: CandidateList, d, tol, edges: bool) -> PairContacts:
     """Node-triangle and edge pairs closer than ``d + tol`` at ``xs`` (per node / first
     edge the closest on each side), after the list's bound: build distance less twice the
     largest motion of the pair's nodes since the build."""
@@ -887,6 +893,8 @@ def _contacts_now(x0, xs, surface, cands: CandidateList, d: float, tol: float) -
     c = pair_contacts(x0, xs, surface, cands.pt_node[sel], cands.pt_tri[sel])
     c = PairContacts(*(a[c.gap < d + tol] for a in c))
     c = _closest_per_key(c, c.idx[:, 0])
+    if not edges:
+        return c
     sel = np.flatnonzero(cands.ee_dist - 2 * moved[cands.ee_nodes].max(axis=1) < d)
     ce = edge_contacts(x0, xs, surface, cands.ee[sel])
     close = ce.gap < d + tol
