@@ -1,13 +1,15 @@
 """Command line: ``clothfem run|validate|schema|plot|report``.
 
-    clothfem run SCENE.toml [--out DIR] [--set key=value ...] [--resume] [PETSc options]
+    clothfem run SCENE.toml [--out DIR] [--set key=value ...] [--resume | --overwrite]
+                 [PETSc options]
     clothfem validate SCENE.toml [--set key=value ...]
     clothfem schema            # the scene reference (docs/scene.md)
     clothfem plot RUN_DIR [RUN_DIR ...] [--out PNG] [--label NAME ...] [--y torque_flex]
     clothfem report RUN_DIR [--markdown FILE]
 
 Works under ``mpirun -n N``; plot and report need neither MPI nor PETSc (docs/cli.md).
-Exit status: 2 invalid scene or unreadable run folder (one-line message), 3 solver
+Exit status: 2 invalid scene, a results folder that holds another run (or files clothfem
+did not write) or is not writable, or an unreadable run folder (one-line message), 3 solver
 failure below the smallest step, 130 interrupted; results written so far are kept.
 """
 
@@ -35,7 +37,14 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument(
         "--resume",
         action="store_true",
-        help="continue a newmark run from the last checkpoint in --out (same number of ranks)",
+        help="continue a newmark or explicit run from the last checkpoint in --out (same "
+        "number of ranks)",
+    )
+    run.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the run in --out (only files clothfem writes; a folder holding other "
+        "files is refused)",
     )
     val = sub.add_parser("validate", help="check a scene file")
     val.add_argument("scene")
@@ -82,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
         logging.getLogger("clothfem").setLevel(logging.INFO if args.verbose == 1 else logging.DEBUG)
     out = Path(args.out or Path("results") / scene["scene"]["name"])
     try:
-        run_scene(scene, out, resume=args.resume)
+        run_scene(scene, out, resume=args.resume, overwrite=args.overwrite)
     except scenes.SceneError as exc:
         print(f"clothfem: {exc}", file=sys.stderr)
         return 2

@@ -1,17 +1,25 @@
 """Run a validated scene: build only what it needs, solve, write results as they come.
 
 The log says what was built (and what was left out because the scene does not need it).
-Scenes with ``[[body]]`` segments run the quasi-static contact path of
-:mod:`clothfem.scenes_arm` (settling, then the hinge motions; its own outputs). Otherwise
-results go to ``out``: ``fabric.xdmf`` (ParaView), ``history.csv`` (one row per accepted
-step, flushed at once), ``final.png``. SIGTERM and Ctrl-C stop the run cleanly: files are
-closed and every step already written is kept.
+Scenes with ``[[body]]`` segments, and dynamic scenes, run the paths of
+:mod:`clothfem.scenes_arm` (settling, then the segment motions; its own outputs). Otherwise
+results go to ``out``: ``fabric.xdmf`` (ParaView, meshio), ``history.csv`` (one row per
+accepted step, flushed at once), ``final.png``. SIGTERM and Ctrl-C stop the run cleanly:
+files are closed and every step already written is kept; a run killed outright leaves
+readable files up to its last written step.
+
+Results folders are never mixed (:func:`check_output`): a run refuses a folder that holds
+another run's files unless asked to overwrite it, and never deletes a file it did not
+write. Everything a run checks before it starts (the scene, the mesh file, the folder)
+fails before anything is written.
 """
 
 from __future__ import annotations
 
+import fnmatch
 import json
 import math
+import os
 import signal
 import time
 from pathlib import Path
@@ -21,7 +29,7 @@ import numpy as np
 from mpi4py import MPI
 
 from . import mesh as meshes
-from .io import ResultWriter, rank0_print, snapshot_png
+from .io import Progress, ResultWriter, rank0_print, snapshot_png
 from .petsc_options import describe_direct_lu
 from .scene import DECRIMPING_KEYS, SceneError
 from .shell import (
@@ -41,11 +49,156 @@ from .shell import (
 )
 from .static import LoadStepping, solve_static
 
-__all__ = ["build_mesh", "build_material", "build_model", "run_scene", "RunStopped"]
+__all__ = [
+    "RUN_FILES",
+    "RunStopped",
+    "build_material",
+    "build_mesh",
+    "build_model",
+    "check_output",
+    "clear_output",
+    "run_scene",
+]
+
+# what a run writes into its folder (file name patterns; checkpoint/ holds rank files)
+RUN_FILES = (
+    "history.csv",
+    "summary.json",
+    "fabric.xdmf",
+    "fabric.h5",
+    "fabric.xdmf.tmp",
+    "fabric_resumed_*.xdmf",
+    "fabric_resumed_*.h5",
+    "snapshot_*.png",
+    "torque_angle.png",
+    "final.png",
+    "animation.gif",
+)
+CHECKPOINT_FILES = ("rank*-of-*.npz", "rank*-of-*.tmp")
 
 
 class RunStopped(RuntimeError):
     """The run was interrupted (SIGTERM / Ctrl-C); results written so far are kept."""
+
+
+def _split_folder(out: Path) -> tuple[list[str], list[str]]:
+    """(entries a run writes, other entries) directly in ``out``."""
+    ours, others = [], []
+    for p in sorted(out.iterdir()):
+        if p.is_dir() and p.name == "checkpoint":
+            inner = [q.name for q in p.iterdir()]
+            mine = all(
+                q.is_file() and any(fnmatch.fnmatch(q.name, pat) for pat in CHECKPOINT_FILES)
+                for q in p.iterdir()
+            )
+            (ours if mine else others).append(p.name + "/" if mine or not inner else p.name)
+        elif p.is_file() and any(fnmatch.fnmatch(p.name, pat) for pat in RUN_FILES):
+            ours.append(p.name)
+        else:
+            others.append(p.name + ("/" if p.is_dir() else ""))
+    return ours, others
+
+
+def _names(items: list[str], k: int = 3) -> str:
+    return ", ".join(items[:k]) + (f" and {len(items) - k} more" if len(items) > k else "")
+
+
+def _output_problem(out: Path, *, overwrite: bool, resume: bool) -> str | None:
+    """Why a run cannot write to ``out`` (one line), or None."""
+    where = f"output folder '{out}'"
+    if overwrite and resume:
+        return f"{where}: --overwrite and --resume exclude each other"
+    if out.exists() and not out.is_dir():
+        return f"{where}: exists and is not a folder"
+    base = out
+    while not base.exists():
+        base = base.parent
+    if not base.is_dir():
+        return f"{where}: cannot be created ('{base}' is a file)"
+    if not os.access(base, os.W_OK | os.X_OK):
+        return f"{where}: not writable"
+    if resume:
+        if not (out / "checkpoint").is_dir():
+            return f"{where}: --resume needs an interrupted run's checkpoint/ there, found none"
+        return None
+    if not out.exists():
+        return None
+    ours, others = _split_folder(out)
+    if others and (overwrite or not ours):
+        what = "--overwrite refused: it" if overwrite else "it is not empty and"
+        return (
+            f"{where}: {what} holds files clothfem does not write ({_names(others)}); "
+            "choose a new or empty folder"
+        )
+    if ours and not overwrite:
+        extra = f" and other files ({_names(others)})" if others else ""
+        return (
+            f"{where}: holds another run ({_names(ours)}){extra}; choose another --out, "
+            "or --overwrite to replace it"
+        )
+    return None
+
+
+def check_output(
+    out: str | Path, *, overwrite: bool = False, resume: bool = False, comm: MPI.Comm
+) -> None:
+    """Raise :class:`SceneError` (one line naming the folder) unless a run may write to
+    ``out``: it is new or empty; or it holds only a previous run's files and ``overwrite``
+    (:func:`clear_output` removes them once the run has started); or ``resume`` and it holds
+    an interrupted run's checkpoint. A folder with files clothfem does not write is refused
+    in every case. Collective; writes nothing."""
+    msg = None
+    if comm.rank == 0:
+        msg = _output_problem(Path(out), overwrite=overwrite, resume=resume)
+    msg = comm.bcast(msg, root=0)
+    if msg:
+        raise SceneError(msg)
+
+
+def clear_output(out: str | Path, *, comm: MPI.Comm) -> None:
+    """Remove the files a previous run wrote to ``out`` (only those: :data:`RUN_FILES` and
+    the rank files of ``checkpoint/``); collective."""
+    out = Path(out)
+    if comm.rank == 0 and out.is_dir():
+        ours, _ = _split_folder(out)
+        for name in ours:
+            path = out / name.rstrip("/")
+            if path.is_dir():
+                for q in path.iterdir():
+                    q.unlink()
+                path.rmdir()
+            else:
+                path.unlink()
+    comm.barrier()
+
+
+def _check_mesh_file(scene: dict[str, Any], comm: MPI.Comm) -> None:
+    """A ``generator = "file"`` mesh must exist and be a gmsh file gmsh can read (checked on
+    rank 0, the decision shared)."""
+    m = scene["mesh"]
+    if m["generator"] != "file":
+        return
+    msg = None
+    if comm.rank == 0:
+        path = Path(m["file"])
+        if not path.is_file():
+            msg = f"scene key 'mesh.file': {str(path)!r} does not exist"
+        else:
+            import gmsh
+
+            gmsh.initialize()
+            gmsh.option.setNumber("General.Terminal", 0)
+            try:
+                gmsh.merge(str(path))
+                if not len(gmsh.model.mesh.getNodes()[0]):
+                    msg = f"scene key 'mesh.file': {path.name!r} holds no mesh nodes"
+            except Exception as exc:  # gmsh raises a bare Exception
+                msg = f"scene key 'mesh.file': {path.name!r} is not a mesh gmsh can read ({exc})"
+            finally:
+                gmsh.finalize()
+    msg = comm.bcast(msg, root=0)
+    if msg:
+        raise SceneError(msg)
 
 
 def build_mesh(scene: dict[str, Any], comm: MPI.Comm) -> meshes.SurfaceMesh:
@@ -75,7 +228,10 @@ def build_mesh(scene: dict[str, Any], comm: MPI.Comm) -> meshes.SurfaceMesh:
             **common,
         )
     else:
-        sm = meshes.load_msh(m["file"], comm)
+        try:
+            sm = meshes.load_msh(m["file"], comm)
+        except ValueError as exc:
+            raise SceneError(f"scene key 'mesh.file': {exc}") from None
     if m["translate"] is not None:
         sm.mesh.geometry.x[:] += np.asarray(m["translate"])
     return sm
@@ -218,6 +374,12 @@ def _write_summary(out: Path, summary: dict[str, Any], comm: MPI.Comm) -> None:
         (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
 
 
+def _started(out: Path, comm: MPI.Comm) -> bool:
+    """Whether the run has written its first results to ``out`` (rank 0 decides)."""
+    ok = (out / "history.csv").exists() or (out / "fabric.h5").exists()
+    return bool(comm.bcast(ok if comm.rank == 0 else None, root=0))
+
+
 def _measures(scene: dict[str, Any], out: Path) -> dict[str, Any] | None:
     """The resistance measures of a body scene's history (:func:`report.resistance_measures`),
     keyed by the measured joint (the torque segment); None without a readable history."""
@@ -239,17 +401,21 @@ def run_scene(
     *,
     comm: MPI.Comm = MPI.COMM_WORLD,
     resume: bool = False,
+    overwrite: bool = False,
 ) -> Path:
     """Run ``scene`` and write its results to ``out``; returns the output folder.
 
-    ``resume``: continue a dynamic run from the last checkpoint in ``out/checkpoint``.
+    ``out`` must be new or empty (:func:`check_output`); ``overwrite``: it may hold a previous
+    run's files, which are removed once the model is built; ``resume``: continue a dynamic
+    run from the last checkpoint in ``out/checkpoint``. Nothing is written (or removed)
+    before the scene, the mesh file and the folder have passed their checks.
     ``out/summary.json`` says at the end whether the run completed (and why not).
     """
     out = Path(out)
-    if scene["solver"]["integrator"] != "static" and not scene["body"]:
+    if scene["solver"]["integrator"] == "newmark" and not scene["body"]:
         raise SceneError(
-            f"scene key 'solver.integrator': {scene['solver']['integrator']!r} needs a body "
-            "([[body]] segments) in this version; use 'static'"
+            "scene key 'solver.integrator': 'newmark' needs a body ([[body]] segments) in "
+            "this version; use 'explicit' or 'static' without one"
         )
     if scene["solver"]["integrator"] != "static" and scene["material"]["rho"] <= 0:
         raise SceneError(
@@ -261,8 +427,12 @@ def run_scene(
             "--resume needs solver.integrator = 'newmark' or 'explicit' (static runs write no "
             "checkpoints)"
         )
+    check_output(out, overwrite=overwrite, resume=resume, comm=comm)
+    _check_mesh_file(scene, comm)
     t0 = time.perf_counter()
     model, log = build_model(scene, comm)
+    if overwrite:
+        clear_output(out, comm=comm)
     rank0_print(f"scene {scene['scene']['name']!r}")
     for line in log:
         rank0_print("  built " + line if "not built" not in line else "  " + line)
@@ -279,7 +449,7 @@ def run_scene(
         stop["signal"] = signum
 
     old = signal.signal(signal.SIGTERM, handler)
-    if scene["body"]:
+    if scene["body"] or s["integrator"] != "static":
         from .scenes_arm import run_contact_scene
 
         def check_stop(where: str) -> None:
@@ -305,11 +475,13 @@ def run_scene(
         finally:
             signal.signal(signal.SIGTERM, old)
             summary["wall_time"] = time.perf_counter() - t0
-            if comm.rank == 0:
+            if comm.rank == 0 and scene["body"]:
                 summary["measures"] = _measures(scene, out)
-            _write_summary(out, summary, comm)
+            if _started(out, comm):  # a failed start writes nothing
+                _write_summary(out, summary, comm)
         rank0_print(f"done in {time.perf_counter() - t0:.1f} s; results in {out}/")
         return out
+    progress = Progress(label=scene["scene"]["name"], comm=comm)
     try:
         with ResultWriter(out, model) as writer:
 
@@ -326,8 +498,7 @@ def run_scene(
                         "wall_time": time.perf_counter() - t0,
                     },
                 )
-                bar = "#" * int(20 * rec.load_factor)
-                rank0_print(f"[{bar:<20}] {rec.line()}")
+                progress.update(rec.load_factor, rec.line())
                 if comm.allreduce(stop["signal"] is not None, op=MPI.LOR):
                     raise RunStopped(
                         f"stopped by signal after step {rec.step}; results kept in {out}"
@@ -335,6 +506,7 @@ def run_scene(
 
             solve_static(model, stepping=stepping, on_step=on_step)
     finally:
+        progress.close()
         signal.signal(signal.SIGTERM, old)
     if scene["output"]["png"]:
         snapshot_png(model, out / "final.png", title=scene["scene"]["name"])

@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 __all__ = ["SceneError", "load", "validate", "apply_overrides", "schema_markdown", "MATERIALS"]
 
 
@@ -25,7 +27,7 @@ class SceneError(ValueError):
 
 @dataclass(frozen=True)
 class Key:
-    """One scene key: kind in {str, int, float, bool, vec3, floats, choice}."""
+    """One scene key: kind in {str, int, float, bool, vec3, floats, choice, marker}."""
 
     kind: str
     doc: str
@@ -52,6 +54,7 @@ class Key:
             "int": "an integer",
             "str": "a string",
             "bool": "true or false",
+            "marker": "a marker name, or {midpoint = [a, b]} or {hip_centre = {...}}",
         }
         return kinds[self.kind] + rng
 
@@ -349,6 +352,13 @@ SCHEMA: dict[str, Section] = {
                 default=0.1,
                 lo=0.0,
             ),
+            "duration": Key(
+                "float",
+                "newmark, explicit: simulated time [s] (default settle_time + the longest "
+                "segment motion; required without a moving segment)",
+                lo=0.0,
+                open_lo=True,
+            ),
         },
         "the solver",
         optional=True,
@@ -356,13 +366,23 @@ SCHEMA: dict[str, Section] = {
     "body": Section(
         {
             "name": Key("str", "segment name (e.g. 'upper_arm', 'forearm')", required=True),
-            "type": Key("choice", "segment motion", required=True, choices=("fixed", "hinge")),
+            "type": Key(
+                "choice",
+                "segment motion: at rest, a hinge, or motion capture (Eq. 27 frames of a C3D / "
+                "TRC recording, interpolated)",
+                required=True,
+                choices=("fixed", "hinge", "mocap"),
+            ),
             "radii": Key(
                 "vec3",
                 "ellipsoid radii (r1 along the limb axis, r2, r3) [m], all > 0",
                 required=True,
             ),
-            "centre": Key("vec3", "ellipsoid centre at t = 0 [m]", required=True),
+            "centre": Key(
+                "vec3",
+                "ellipsoid centre at t = 0 [m] (mocap: where the placing segment's Eq. 27 centre "
+                "is put at the window start)",
+            ),
             "axis": Key("vec3", "limb axis e1 (direction of r1) at t = 0", default=[1.0, 0.0, 0.0]),
             "up": Key(
                 "vec3",
@@ -383,11 +403,37 @@ SCHEMA: dict[str, Section] = {
                 default=0.0,
                 lo=0.0,
             ),
+            "file": Key(
+                "str",
+                "mocap: C3D or TRC recording (relative paths: from the working folder, else "
+                "from the scene file's folder)",
+            ),
+            "j1": Key("marker", "mocap: proximal joint centre J1 (Eq. 27)"),
+            "j2": Key("marker", "mocap: distal joint centre J2 (Eq. 27)"),
+            "m": Key("marker", "mocap: auxiliary marker M fixing the roll (Eq. 27)"),
+            "window": Key(
+                "floats",
+                "mocap: [start, end] of the recording to play [s, file time]; it starts after "
+                "solver.settle_time and the segment rests at its end pose afterwards",
+            ),
+            "placed_by": Key(
+                "str",
+                "mocap: the segment whose Eq. 27 pose at the window start is put at its centre "
+                "with its axis and up (default: this one); segments placed by the same one "
+                "share one rigid transform of the recording",
+            ),
+            "max_gap": Key(
+                "int", "mocap: longest marker gap filled by a spline [frames]", default=10, lo=0
+            ),
         },
         "rigid ellipsoid body segments (Man & Swan 2007, Sec. 3.3); a body turns contact on",
         many=True,
         optional=True,
-        variants={"fixed": (), "hinge": ("joint", "hinge_axis", "angle_max")},
+        variants={
+            "fixed": ("centre",),
+            "hinge": ("centre", "joint", "hinge_axis", "angle_max"),
+            "mocap": ("file", "j1", "j2", "m", "window"),
+        },
     ),
     "contact": Section(
         {
@@ -494,7 +540,18 @@ SCHEMA: dict[str, Section] = {
                 default=1,
                 lo=1,
             ),
-            "png": Key("bool", "write PNG snapshots", default=True),
+            "png": Key(
+                "bool",
+                "write PNG snapshots, the torque plot and animation.gif (coloured by the contact "
+                "pressure)",
+                default=True,
+            ),
+            "frames": Key(
+                "int",
+                "most frames of animation.gif, drawn from the written field steps (0: none)",
+                default=40,
+                lo=0,
+            ),
             "checkpoint_every": Key(
                 "int",
                 "newmark: write a restart checkpoint every N accepted steps (explicit: every N "
@@ -538,6 +595,9 @@ def _check_value(path: str, key: Key, value: Any) -> Any:
         if not (isinstance(value, list) and len(value) == 3 and all(number(v) for v in value)):
             _fail(path, f"must be 3 finite numbers, got {value!r}")
         value = [float(v) for v in value]
+    elif key.kind == "marker":
+        if not isinstance(value, str | dict):
+            _fail(path, f"must be {key.describe()}, got {value!r}")
     elif key.kind == "floats":
         if not (isinstance(value, list) and all(number(v) for v in value)):
             _fail(path, f"must be a list of numbers, got {value!r}")
@@ -575,8 +635,10 @@ def _validate_table(path: str, section: Section, table: Any) -> dict[str, Any]:
     return out
 
 
-def validate(data: dict[str, Any]) -> dict[str, Any]:
-    """Validate a parsed scene and fill defaults; raises :class:`SceneError` (one line)."""
+def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[str, Any]:
+    """Validate a parsed scene and fill defaults; raises :class:`SceneError` (one line).
+    ``base``: the scene file's folder (relative motion-capture paths are also looked up
+    there)."""
     unknown = sorted(set(data) - set(SCHEMA))
     if unknown:
         _fail(unknown[0], f"unknown table; allowed: {', '.join(SCHEMA)}")
@@ -616,7 +678,93 @@ def validate(data: dict[str, Any]) -> dict[str, Any]:
     if el["scheme"] == "psri" and el["stabilization"] != 0.0:
         _fail("element.stabilization", "is a parameter of element.scheme = 'sri' only")
     _validate_body(data, out)
+    _validate_mocap(out, base=None if base is None else Path(base))
+    _validate_duration(out)
     return out
+
+
+def _validate_duration(out: dict[str, Any]) -> None:
+    sv = out["solver"]
+    moving = any(seg["type"] != "fixed" for seg in out["body"])
+    if sv["integrator"] != "static" and not moving and sv["duration"] is None:
+        _fail(
+            "solver.duration",
+            f"required with solver.integrator = {sv['integrator']!r} and no moving body "
+            "segment (a number of seconds > 0)",
+        )
+
+
+def _read_motion(path: Path):
+    """The marker set of a C3D or TRC file (clothfem.body readers)."""
+    from .body import read_c3d, read_trc
+
+    return read_trc(path) if path.suffix.lower() == ".trc" else read_c3d(path)
+
+
+def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
+    """Mocap segments: the file exists and reads, the window lies in the recording, the
+    markers are in it (gaps no longer than max_gap), the placing segment exists."""
+    from .body import validate_marker_map
+
+    body = out["body"]
+    names = [seg["name"] for seg in body]
+    cache: dict[Path, Any] = {}
+    for i, seg in enumerate(body):
+        if seg["type"] != "mocap":
+            for k in ("file", "j1", "j2", "m", "window", "placed_by"):
+                if seg[k] is not None:
+                    _fail(f"body[{i}].{k}", "is a key of type = 'mocap' segments only")
+            continue
+        key = f"body[{i}]"
+        path = Path(seg["file"])
+        if not path.is_absolute() and not path.is_file() and base is not None:
+            path = base / path
+        if not path.is_file():
+            _fail(f"{key}.file", f"{seg['file']!r} does not exist (a .c3d or .trc file)")
+        path = path.resolve()
+        if path not in cache:
+            try:
+                cache[path] = _read_motion(path)
+            except (ValueError, OSError, RuntimeError) as exc:
+                _fail(f"{key}.file", f"cannot be read: {exc}")
+        seg["file"] = str(path)
+        markers = cache[path]
+        t = markers.times
+        w = seg["window"]
+        if len(w) != 2 or not w[0] < w[1]:
+            _fail(f"{key}.window", f"must be [start, end] with start < end [s], got {w!r}")
+        lo, hi = float(t[0]), float(t[-1])
+        tol = 1e-9 * max(1.0, abs(hi))
+        if w[0] < lo - tol or w[1] > hi + tol:
+            _fail(
+                f"{key}.window",
+                f"must lie within the recording [{lo:g}, {hi:g}] s of {path.name}, got {w!r}",
+            )
+        first = int(np.searchsorted(t, w[0] - tol))
+        last = int(np.searchsorted(t, w[1] + tol, side="right")) - 1
+        if last - first < 1:
+            _fail(f"{key}.window", f"holds fewer than 2 frames of {path.name}, got {w!r}")
+        seg["window"] = [float(v) for v in w]
+        refs = {k: seg[k] for k in ("j1", "j2", "m")}
+        try:
+            validate_marker_map({seg["name"]: refs})
+        except ValueError as exc:
+            _fail(f"{key}.j1", str(exc))
+        part = markers.window(first=first, last=last)
+        for k, ref in refs.items():
+            try:
+                part.resolve(ref, max_gap=seg["max_gap"])
+            except ValueError as exc:
+                _fail(f"{key}.{k}", str(exc))
+        placed = seg["placed_by"] or seg["name"]
+        if placed not in names or body[names.index(placed)]["type"] != "mocap":
+            _fail(f"{key}.placed_by", f"must name a mocap segment, one of {names}, got {placed!r}")
+        if body[names.index(placed)]["centre"] is None:
+            _fail(
+                f"body[{names.index(placed)}].centre",
+                f"required: segment {placed!r} places the recording",
+            )
+        seg["placed_by"] = placed
 
 
 def _validate_decrimping(given: dict[str, Any], mat: dict[str, Any]) -> None:
@@ -665,6 +813,8 @@ def _validate_body(data: dict[str, Any], out: dict[str, Any]) -> None:
         ]
         if math.hypot(*cross) <= 1e-9 * math.hypot(*axis) * math.hypot(*up):
             _fail(f"body[{i}].up", f"must not be parallel to axis {axis!r}, got {up!r}")
+        if seg["type"] == "mocap" and seg["max_gap"] < 0:
+            _fail(f"body[{i}].max_gap", "must be >= 0")
         if seg["type"] == "hinge" and math.hypot(*seg["hinge_axis"]) == 0:
             _fail(f"body[{i}].hinge_axis", "must be a non-zero vector, got [0, 0, 0]")
         if seg["type"] == "hinge" and 0.5 * seg["omega"] * seg["omega_ramp"] > seg["angle_max"]:
@@ -736,7 +886,7 @@ def load(path: str | Path, overrides: list[str] | None = None) -> dict[str, Any]
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"scene file {path.name!r} is not valid TOML: {exc}") from None
-    return validate(apply_overrides(data, overrides or []))
+    return validate(apply_overrides(data, overrides or []), base=path.parent)
 
 
 def schema_markdown() -> str:

@@ -49,10 +49,10 @@ import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
 
-from .body import FixedMotion, HingeMotion
+from .body import FixedMotion, HingeMotion, MarkerSet, Pose, body_from_markers, segment_frames
 from .contact.forces import joint_torque
 from .contact.lagrange import ContactDivergence, LagrangeContact, LagrangeContactParameters
-from .io import ResultWriter, rank0_print, snapshot_png
+from .io import Progress, ResultWriter, animate_series, rank0_print, snapshot_png
 from .report import joint_power, joint_work
 from .scene import SceneError
 from .shell import ShellModel
@@ -71,10 +71,89 @@ def _frame(axis, up) -> np.ndarray:
     return np.stack([e1, e2, np.cross(e1, e2)], axis=1)
 
 
-def body_motions(scene: dict[str, Any]) -> list[FixedMotion | HingeMotion]:
+@dataclass(frozen=True)
+class PlayedMotion:
+    """A recorded segment motion (``motion``, an :class:`InterpolatedMotion` whose times start
+    at 0 at the window start) played until ``t_end`` [s], then at rest in its last pose."""
+
+    motion: Any
+    t_end: float
+
+    def pose(self, t: float) -> Pose:
+        if t >= self.t_end:
+            p = self.motion.pose(self.t_end)
+            zero = np.zeros(3)
+            return Pose(
+                time=t, centre=p.centre, rotation=p.rotation, velocity=zero, angular_velocity=zero
+            )
+        return self.motion.pose(max(t, 0.0))
+
+
+def _window(markers: MarkerSet, window: list[float]) -> MarkerSet:
+    """The rows of ``markers`` within ``window`` [s] (validated by the scene)."""
+    t = markers.times
+    tol = 1e-9 * max(1.0, abs(float(t[-1])))
+    first = int(np.searchsorted(t, window[0] - tol))
+    last = int(np.searchsorted(t, window[1] + tol, side="right")) - 1
+    return markers.window(first=first, last=last)
+
+
+def _mocap_motions(scene: dict[str, Any]) -> dict[int, PlayedMotion]:
+    """The motions of the ``type = "mocap"`` segments: each recording's window, moved by the
+    rigid transform that puts the placing segment's Eq. 27 pose at the window start at its
+    ``centre`` with axes (``axis``, ``up``), played from t = 0 (:func:`body_from_markers`)."""
+    from .scene import _read_motion
+
+    segs = scene["body"]
+    by_name = {seg["name"]: seg for seg in segs}
+    files: dict[str, MarkerSet] = {}
+
+    def part(seg) -> MarkerSet:
+        if seg["file"] not in files:
+            files[seg["file"]] = _read_motion(Path(seg["file"]))
+        return _window(files[seg["file"]], seg["window"])
+
+    def refs(seg) -> dict[str, Any]:
+        return {k: seg[k] for k in ("j1", "j2", "m")}
+
+    out: dict[int, PlayedMotion] = {}
+    for i, seg in enumerate(segs):
+        if seg["type"] != "mocap":
+            continue
+        placing = by_name[seg["placed_by"]]
+        ref = segment_frames(
+            part(placing), marker_map={placing["name"]: refs(placing)}, max_gap=placing["max_gap"]
+        )[placing["name"]]
+        c0, q0 = ref.centres[0], ref.rotations[0]
+        rot = _frame(placing["axis"], placing["up"]) @ q0.T
+        shift = np.asarray(placing["centre"]) - rot @ c0
+        own = part(seg)
+        moved = MarkerSet(
+            times=own.times - own.times[0],
+            names=own.names,
+            positions=own.positions @ rot.T + shift,
+            source=own.source,
+            first_frame=own.first_frame,
+        )
+        body = body_from_markers(
+            moved,
+            marker_map={seg["name"]: refs(seg)},
+            radii={seg["name"]: seg["radii"]},
+            max_gap=seg["max_gap"],
+        )
+        motion = body.segments[0].motion
+        out[i] = PlayedMotion(motion=motion, t_end=float(motion.times[-1]))
+    return out
+
+
+def body_motions(scene: dict[str, Any]) -> list[FixedMotion | HingeMotion | PlayedMotion]:
     """One motion per ``[[body]]`` segment (order kept), time in s."""
-    out: list[FixedMotion | HingeMotion] = []
-    for seg in scene["body"]:
+    out: list[FixedMotion | HingeMotion | PlayedMotion] = []
+    mocap = _mocap_motions(scene)
+    for i, seg in enumerate(scene["body"]):
+        if seg["type"] == "mocap":
+            out.append(mocap[i])
+            continue
         q0 = _frame(seg["axis"], seg["up"])
         if seg["type"] == "fixed":
             out.append(FixedMotion(centre=seg["centre"], rotation=q0))
@@ -116,6 +195,12 @@ def contact_log(scene: dict[str, Any]) -> list[str]:
         r = ", ".join(f"{v:g}" for v in seg["radii"])
         if seg["type"] == "fixed":
             segs.append(f"{seg['name']} fixed (radii {r} m)")
+        elif seg["type"] == "mocap":
+            w = seg["window"]
+            segs.append(
+                f"{seg['name']} motion capture {Path(seg['file']).name} {w[0]:g}-{w[1]:g} s "
+                f"(placed by {seg['placed_by']}; radii {r} m)"
+            )
         else:
             segs.append(
                 f"{seg['name']} hinge about {seg['hinge_axis']} through {seg['joint']} m to "
@@ -403,8 +488,15 @@ def run_contact_scene(
         work.update(theta=theta, tau=tau)
         return work["W"]
 
+    pressure = fem.Function(contact.S, name="contact_pressure")  # Pa, nodal (lam / area)
+
+    def update_pressure() -> None:
+        pressure.x.array[: contact.n] = contact.state().pressure  # collective (areas)
+        pressure.x.scatter_forward()
+
     def snapshot(tag: str) -> None:
-        _snapshot(scene, model, out, comm, tag, contact.bodies)
+        update_pressure()
+        _snapshot(scene, model, out, comm, tag, contact.bodies, pressure=pressure)
 
     increments = c["increments"]
     hinge_ids = [i for i, m in enumerate(motions) if isinstance(m, HingeMotion)]
@@ -417,6 +509,7 @@ def run_contact_scene(
             stab.commit()
         check_stop(f"a sub-step at load factor {rec.load_factor:g}")
 
+    progress = Progress(label=scene["scene"]["name"], comm=comm)
     with ResultWriter(out, model) as writer:
 
         def write_row(stage: str, inc: int, t: float, recs) -> None:
@@ -456,17 +549,21 @@ def run_contact_scene(
                 cutbacks=0,
                 max_penetration=max(summary.get("max_penetration", 0.0), row["max_penetration"]),
             )
-            if stage == "settle" or inc % every == 0 or inc == increments:
-                # XDMF time: load factor - 1 while settling (ends at 0), then the motion time
-                writer.write(t if stage == "motion" else row["load_factor"] - 1.0, row)
+            settled = stage == "settle" and row["load_factor"] == 1.0
+            if settled or (stage == "motion" and (inc % every == 0 or inc == increments)):
+                # fields of the settled state (t = 0) and the motion (t > 0); the partial-load
+                # states of the settling share t = 0 and are not written
+                update_pressure()
+                writer.write(t, row, (pressure,))
             else:
                 writer.append_row(row)
-            rank0_print(
-                f"  {stage:6s} {inc:3d}  angle {angle:6.2f} deg  |tau| {row['torque_mag']:.5g} N m"
-                f"  tau.axis {row['torque_flex']:+.5g}  active {last.n_active:4d}"
-                f"  pen {row['max_penetration']:.1e} m  sub {len(recs)}"
-                f"  sets {row['active_set_iterations']} newton {row['newton_iterations']}"
-                f"  {row['wall_time']:.1f} s"
+            n_settle = scene["solver"]["steps"] if c["settle"] else 1
+            done = inc / n_settle if stage == "settle" else 1.0 + inc / max(increments, 1)
+            progress.update(
+                done / (2.0 if hinge_ids else 1.0),
+                f"{stage} {inc}  angle {angle:6.2f} deg  |tau| {row['torque_mag']:.5g} N m"
+                f"  active {last.n_active}  pen {row['max_penetration']:.1e} m  sub {len(recs)}"
+                f"  newton {row['newton_iterations']}",
             )
             if row["max_penetration"] > 1e-3 * thickness:
                 rank0_print(f"  warning: max penetration {row['max_penetration']:.2e} m > 1e-3 t")
@@ -510,10 +607,34 @@ def run_contact_scene(
                     snapshot(f"{inc:03d}")
             snapshot("final")
         finally:
+            progress.close()
             _end_together(comm)
             if png and comm.rank == 0 and writer.csv_path.exists():
                 _torque_plot(writer.csv_path, out / "torque_angle.png", name)
+
+                def posed(t: float) -> list:
+                    poses = [m.pose(t) for m in motions]
+                    return [
+                        (p.centre, p.rotation, r)
+                        for p, (_, _, r) in zip(poses, bodies, strict=True)
+                    ]
+
+                _animation(scene, out, posed)
     return out
+
+
+def _animation(scene: dict[str, Any], out: Path, bodies_at: Callable[[float], list]) -> None:
+    """``out/animation.gif`` from the field series (rank 0; scenes with PNG output)."""
+    if not scene["output"]["png"] or not (out / "fabric.h5").exists():
+        return
+    animate_series(
+        out / "fabric.h5",
+        out / "animation.gif",
+        bodies_at=lambda t: _ellipsoid_meshes(bodies_at(t)),
+        title=scene["scene"]["name"],
+        view="xz",
+        max_frames=scene["output"]["frames"],
+    )
 
 
 def _end_together(comm: MPI.Comm) -> None:
@@ -613,42 +734,64 @@ class _Plan:
 
 
 def _plan(scene: dict[str, Any], motions: list) -> _Plan:
-    J = torque_centre(scene)
+    J = torque_centre(scene) if scene["body"] else np.zeros(3)
     k = _torque_segment(scene)
     hinge_ids = [i for i, m in enumerate(motions) if isinstance(m, HingeMotion)]
     t_settle = scene["solver"]["settle_time"]
+    moving = [m for m in motions if not isinstance(m, FixedMotion)]
+    t_end = scene["solver"]["duration"]
+    if t_end is None:
+        t_end = t_settle + max((m.t_end for m in moving), default=0.0)
     return _Plan(
         motions=motions,
         k_torque=k,
         J=J,
-        aj=_aj_mask(scene, J),
+        aj=_aj_mask(scene, J) if scene["body"] else None,
         hinge_axis=np.asarray(motions[k].axis) if k is not None else np.zeros(3),
         hinged=bool(hinge_ids),
         t_settle=t_settle,
-        t_end=t_settle + max((motions[i].t_end for i in hinge_ids), default=0.0),
+        t_end=t_end,
     )
 
 
 def _snapshot(
-    scene: dict[str, Any], model: ShellModel, out: Path, comm: MPI.Comm, tag: str, bodies
+    scene: dict[str, Any],
+    model: ShellModel,
+    out: Path,
+    comm: MPI.Comm,
+    tag: str,
+    bodies,
+    *,
+    pressure: fem.Function | None = None,
 ) -> None:
-    """``out/snapshot_<tag>.png`` of the fabric with the ellipsoids ``bodies`` (if PNGs)."""
+    """``out/snapshot_<tag>.png`` of the fabric, coloured by the contact ``pressure`` (else
+    by |u|), with the ellipsoids ``bodies`` opaque (if PNGs)."""
     if scene["output"]["png"]:
         snapshot_png(
             model,
             out / f"snapshot_{tag}.png",
             title=f"{scene['scene']['name']} {tag}",
-            extra_meshes=_ellipsoid_meshes(bodies) if comm.rank == 0 else (),
+            extra_meshes=_ellipsoid_meshes(bodies) if comm.rank == 0 and bodies else (),
             view="xz",
+            pressure=pressure,
         )
 
 
-def _progress_snapshots(plan: _Plan, state: dict, stage: str, angle: float, snap) -> None:
+def _progress_snapshots(
+    plan: _Plan, state: dict, stage: str, angle: float, snap, *, t: float = 0.0
+) -> None:
     """``snap("settled")`` when the motion starts, then ``snap(<angle>deg)`` at each quarter of
-    the motion; ``state["snap"]`` counts the snapshots taken (checkpointed)."""
+    the hinge motion (without a hinge: ``snap(t<time>s)`` at each quarter of the time after
+    the settling); ``state["snap"]`` counts the snapshots taken (checkpointed)."""
     if stage == "motion" and state["snap"] == 0:
         state["snap"] = 1
         snap("settled")
+    if not plan.hinged:
+        span = plan.t_end - plan.t_settle
+        while 1 <= state["snap"] <= 3 and t >= plan.t_settle + span * state["snap"] / 4 - 1e-12:
+            snap(f"t{plan.t_settle + span * state['snap'] / 4:.3f}s")
+            state["snap"] += 1
+        return
     quarters = plan.quarters()
     while state["snap"] <= 3 and angle >= quarters[state["snap"] - 1] - 1e-9:
         snap(f"{quarters[state['snap'] - 1]:04.1f}deg")
@@ -698,8 +841,15 @@ def _run_dynamic(
     J, aj, hinge_axis, t_end, angle_at = plan.J, plan.aj, plan.hinge_axis, plan.t_end, plan.angle_at
     name = scene["scene"]["name"]
 
+    pressure = fem.Function(contact.S, name="contact_pressure")  # Pa, nodal (lam / area)
+
+    def update_pressure() -> None:
+        pressure.x.array[: contact.n] = contact.state().pressure  # collective (areas)
+        pressure.x.scatter_forward()
+
     def snapshot(tag: str) -> None:
-        _snapshot(scene, model, out, comm, tag, contact.bodies)
+        update_pressure()
+        _snapshot(scene, model, out, comm, tag, contact.bodies, pressure=pressure)
 
     state = {"step": 0, "rows": 0, "cut": 0, "pen": 0.0, "newton": 0, "snap": 0}
     # the measured joint's work [J], hinge angle [rad] and segment torque about the hinge
@@ -716,12 +866,14 @@ def _run_dynamic(
         state["pen"] = float(data["run_pen"])
         keep = state["rows"]
         rank0_print(f"  resumed from the checkpoint at t = {dc.t:.6g} s (step {state['step']})")
-    xdmf_name = "fabric" if keep is None else f"fabric_resumed_{state['step']:05d}"
-    pressure = fem.Function(contact.S, name="contact_pressure")  # Pa, nodal (lam / area)
     model.u.name = "displacement"
     timers0 = dict(contact.timers)
+    progress = Progress(
+        label=name, comm=comm, start=min(max(dc.t / t_end, 0.0), 1.0) if t_end > 0 else 0.0
+    )
+    resume_after = dc.t if resume else None
 
-    with ResultWriter(out, model, name=xdmf_name, keep_rows=keep) as writer:
+    with ResultWriter(out, model, keep_rows=keep, resume_after=resume_after) as writer:
 
         def on_step(r) -> None:
             state["step"] += 1
@@ -742,10 +894,8 @@ def _run_dynamic(
                 state.update(theta=theta, tau_axis=tau_axis)
             tio = time.perf_counter()
             step = state["step"]
-            if step % o["every"] == 0:
-                st = contact.state()  # collective (lumped areas)
-                pressure.x.array[: contact.n] = st.pressure
-                pressure.x.scatter_forward()
+            if step % o["every"] == 0 or r.time >= t_end * (1 - 1e-12):  # and the last
+                update_pressure()
                 writer.write_fields(r.time, (pressure,))
             if o["checkpoint_every"] and step % o["checkpoint_every"] == 0:
                 run = {f"run_{k}": np.array(v) for k, v in state.items()}
@@ -799,13 +949,13 @@ def _run_dynamic(
                 newton_iterations=state["newton"],
             )
             frac = min(max(r.time / t_end, 0.0), 1.0) if t_end > 0 else 1.0
-            rank0_print(
-                f"  [{'#' * int(20 * frac):<20}] t {r.time:7.4f} s  angle {angle:6.2f} deg  "
-                f"|tau| {row['torque_mag']:.4f} N m  step {step}  dt {r.dt:.2e}  cut "
-                f"{r.cutbacks}  active {cr.n_active}  newton {cr.newton_iterations}  "
-                f"{now - t0:.0f} s"
+            progress.update(
+                frac,
+                f"t {r.time:7.4f} s  angle {angle:6.2f} deg  |tau| {row['torque_mag']:.4f} N m"
+                f"  step {step}  dt {r.dt:.2e}  cut {r.cutbacks}  active {cr.n_active}  "
+                f"newton {cr.newton_iterations}",
             )
-            _progress_snapshots(plan, state, row["stage"], angle, snapshot)
+            _progress_snapshots(plan, state, row["stage"], angle, snapshot, t=r.time)
             check_stop(f"step {step} (t = {r.time:.6g} s)")
 
         try:
@@ -823,10 +973,26 @@ def _run_dynamic(
                 f"dynamic contact stopped at t = {dc.t:.6g} s ({angle_at(dc.t):.2f} deg): {exc}"
             ) from None
         finally:
+            progress.close()
             _end_together(comm)
             if o["png"] and comm.rank == 0 and writer.csv_path.exists():
                 _torque_plot(writer.csv_path, out / "torque_angle.png", name)
+                _animation(scene, out, lambda t: bodies_at(t)[0])
     return out
+
+
+@dataclass(frozen=True)
+class _NoContact:
+    """The contact diagnostics of a row without a body."""
+
+    active: int = 0
+    n_stick: int = 0
+    max_penetration: float = 0.0
+    min_gap_after: float = math.inf
+    sum_lambda: float = 0.0
+
+
+_NO_CONTACT = _NoContact()
 
 
 def _run_explicit(
@@ -845,8 +1011,9 @@ def _run_explicit(
     fixed step ``solver.safety`` x the stable step at t = 0. Loads ramp up and the body rests
     as in :func:`_run_dynamic`. One CSV row per ``output.interval`` [s]: the torque, resultant
     and multiplier sum are the means over its steps (the per-step FILM forces are impulses);
-    fields every ``output.every`` rows; a restart checkpoint (state, velocity, acceleration,
-    step size) every ``output.checkpoint_every`` rows."""
+    fields every ``output.every`` rows and at the end; a restart checkpoint (state, velocity,
+    acceleration, step size) every ``output.checkpoint_every`` rows. Without a body (a free
+    drape) no contact is built and the contact columns are 0."""
     from .contact.film import FilmContact, FilmParameters
     from .dynamics import (
         DynamicsDivergence,
@@ -863,7 +1030,7 @@ def _run_explicit(
     system = ShellSystem(model, rotary_scale=sv["rotary_scale"])
     load = (lambda t: min(t / t_ramp, 1.0)) if t_ramp > 0 else (lambda t: 1.0)
     state = {"row": 0, "pen": 0.0, "snap": 0, "contact_wall": 0.0, "t_row": time.perf_counter()}
-    start: dict[str, Any] = {"step": 0, "v": None, "a": None, "clock": None}
+    start: dict[str, Any] = {"step": 0, "v": None, "a": None, "clock": None, "work": (0.0, 0.0)}
     keep = None
     if resume:
         data = _load_checkpoint(out, comm)
@@ -889,6 +1056,10 @@ def _run_explicit(
         state["pen"] = float(data["run_pen"])
         state["work"] = float(data["run_work"]) if "run_work" in data else 0.0
         keep = state["row"]
+        if "run_external_work" in data:  # the integrator's work accumulators
+            start["work"] = (float(data["run_external_work"]), float(data["run_damping_work"]))
+        # the time of the checkpointed row (older checkpoints: keep every field step)
+        start["time"] = float(data["run_time"]) if "run_time" in data else math.inf
     else:
         st = stable_time_step(system, lam=load(0.0), iterations=600)
         dt = sv["safety"] * st.dt_crit
@@ -897,24 +1068,33 @@ def _run_explicit(
         f"{'converged' if st.converged else 'not converged'} in {st.iterations}), "
         f"dt {dt:.4e} s"
     )
-    fc = FilmContact(system, bodies_at, params=FilmParameters(mu=c["mu"], kernel=c["kernel"]))
+    fc = None
+    if scene["body"]:
+        params = FilmParameters(mu=c["mu"], kernel=c["kernel"])
+        fc = FilmContact(system, bodies_at, params=params)
     if resume:
-        fc.dissipation_total = float(data["contact_dissipation"])
+        if fc is not None:
+            fc.dissipation_total = float(data["contact_dissipation"])
         rank0_print(f"  resumed from the checkpoint after step {start['step']} (row {keep})")
     plan = _plan(scene, motions)
     J, aj, hinge_axis, t_end, angle_at = plan.J, plan.aj, plan.hinge_axis, plan.t_end, plan.angle_at
     k_torque, name = plan.k_torque, scene["scene"]["name"]
-    n = fc.n
-    area = fc.mass / (model.material.rho * model.thickness)  # reference lumped areas [m^2]
-    in_aj = None if aj is None else np.asarray(aj(fc.X.T.copy()), dtype=bool)  # fixed set AJ
+    n = model.n_owned
+    in_aj = None  # the fixed node set AJ (reference positions)
+    if fc is not None and aj is not None:
+        in_aj = np.asarray(aj(fc.X.T.copy()), dtype=bool)
 
-    def snapshot(tag: str, t: float) -> None:
-        _snapshot(scene, model, out, comm, tag, bodies_at(t)[0])
-
-    pressure = fem.Function(fem.FunctionSpace(model.mesh, model.V.ufl_element().sub_elements()[0]))
-    pressure.name = "contact_pressure"  # Pa, nodal (lam / reference lumped area), last step
+    pressure = None  # Pa, nodal (lam / reference lumped area), last step
+    if fc is not None:
+        S = fem.FunctionSpace(model.mesh, model.V.ufl_element().sub_elements()[0])
+        pressure = fem.Function(S, name="contact_pressure")
+        area = fc.mass / (model.material.rho * model.thickness)  # reference lumped areas [m^2]
     model.u.name = "displacement"
     interval = o["interval"]
+    fields = () if pressure is None else (pressure,)
+
+    def snapshot(tag: str, t: float) -> None:
+        _snapshot(scene, model, out, comm, tag, bodies_at(t)[0], pressure=pressure)
 
     def ends_row(t: float) -> bool:
         """The step to ``t`` ends a history row (one row per interval, and the last step)."""
@@ -923,13 +1103,20 @@ def _run_explicit(
     acc = {"tau": np.zeros(3), "res": np.zeros(3), "n": 0, "work": 0.0}
     state.setdefault("work", 0.0)  # joint work up to the last row [J] (all ranks)
     hinge_motion = _measured_hinge(motions, k_torque)
-    xdmf_name = "fabric" if keep is None else f"fabric_resumed_{start['step']:06d}"
+    progress = Progress(
+        label=name,
+        comm=comm,
+        start=min(max(start.get("time", 0.0) / t_end, 0.0), 1.0) if t_end > 0 else 0.0,
+    )
+    state["t_last"] = 0.0  # time of the last step [s]
 
     def local_torque_and_resultant(t: float) -> tuple[np.ndarray, np.ndarray, float]:
         """Eq. 28 torque about J and the contact resultant of this step over the owned nodes,
         and the power [W] the measured joint spends against the garment in it (-tau_seg .
         omega, tau_seg the torque of the forces on the moving segment about its joint; not
         reduced: the runner sums them over a row's steps and reduces once per row)."""
+        if fc is None:
+            return np.zeros(3), np.zeros(3), 0.0
         f = fc.forces_on_body()
         touching = fc.contact_body() == k_torque
         on = touching if c["aj"] == "touching" else in_aj
@@ -946,16 +1133,20 @@ def _run_explicit(
                 power = float(joint_power(seg, omega))
         return np.asarray(tau, dtype=float), f.sum(axis=0), power
 
-    with ResultWriter(out, model, name=xdmf_name, keep_rows=keep) as writer:
+    resume_after = start["time"] if resume else None
+    with ResultWriter(out, model, keep_rows=keep, resume_after=resume_after) as writer:
 
         def on_state(r, v, a) -> None:  # after on_step: checkpoint at the cadence of rows
             if not state.pop("checkpoint", False):
                 return
             run = {"run_step": r.step, "run_row": state["row"], "run_snap": state["snap"]}
+            run["run_time"] = r.time
+            run.update(run_external_work=r.external_work, run_damping_work=r.damping_work)
             if r.clock is not None and r.clock[1] > 0:  # the step shrank: save its clock
                 keys = ("t_base", "step_base", "h", "n_end")
                 run.update({f"run_clock_{k}": val for k, val in zip(keys, r.clock, strict=True)})
-            run.update(run_pen=state["pen"], contact_dissipation=fc.dissipation_total, dt=dt)
+            dissipation = fc.dissipation_total if fc is not None else 0.0
+            run.update(run_pen=state["pen"], contact_dissipation=dissipation, dt=dt)
             run.update(run_work=state["work"])
             run.update({f"st_{k}": getattr(st, k) for k in StableStep.__dataclass_fields__})
             model_data = {f"model_{k}": val for k, val in model.state_arrays().items()}
@@ -970,9 +1161,10 @@ def _run_explicit(
             acc["res"] += res_local
             acc["work"] += power * r.dt  # the impulse rule of report.joint_work
             acc["n"] += 1
+            state["t_last"] = r.time
             if not ends_row(r.time):
                 return
-            h = fc.collect()  # the contact diagnostics of the row's steps (collective)
+            h = fc.collect() if fc is not None else _NO_CONTACT  # the row's contact (collective)
             state["row"] += 1
             k = acc["n"]
             sums = np.concatenate([acc["tau"], acc["res"], [acc["work"]]])
@@ -984,10 +1176,11 @@ def _run_explicit(
             pen_after = max(0.0, -h.min_gap_after) if math.isfinite(h.min_gap_after) else 0.0
             state["pen"] = max(state["pen"], pen_after)
             tio = time.perf_counter()
-            if state["row"] % o["every"] == 0:
+            if pressure is not None:
                 pressure.x.array[:n] = fc.nodal_multipliers() / area
                 pressure.x.scatter_forward()
-                writer.write_fields(r.time, (pressure,))
+            if state["row"] % o["every"] == 0 or r.time >= t_end - 1e-12:  # and the last
+                writer.write_fields(r.time, fields)
             t_io = time.perf_counter() - tio
             row = {
                 "stage": "settle" if r.time <= t_settle + 1e-12 else "motion",
@@ -1008,14 +1201,14 @@ def _run_explicit(
                 "strain_energy": r.strain,
                 "external_work": r.external_work,
                 "joint_work": state["work"],
-                "dissipation_total": fc.dissipation_total,
+                "dissipation_total": fc.dissipation_total if fc is not None else 0.0,
                 "dissipation_material": 0.0,
-                "t_contact": fc.wall - state["contact_wall"],
+                "t_contact": fc.wall - state["contact_wall"] if fc is not None else 0.0,
                 "t_io": t_io,
                 "wall_time": now - state["t_row"],
                 "elapsed": now - t0,
             }
-            state["contact_wall"], state["t_row"] = fc.wall, now
+            state["contact_wall"], state["t_row"] = fc.wall if fc is not None else 0.0, now
             writer.append_row(row)
             every = o["checkpoint_every"]
             state["checkpoint"] = bool(every) and state["row"] % every == 0
@@ -1031,12 +1224,14 @@ def _run_explicit(
                 newton_iterations=0,
             )
             frac = min(max(r.time / t_end, 0.0), 1.0) if t_end > 0 else 1.0
-            rank0_print(
-                f"  [{'#' * int(20 * frac):<20}] t {r.time:7.4f} s  angle {angle:6.2f} deg  "
-                f"|tau| {row['torque_mag']:.4f} N m  row {state['row']}  steps "
-                f"{r.step}  active {h.active}  {now - t0:.0f} s"
+            progress.update(
+                frac,
+                f"t {r.time:7.4f} s  angle {angle:6.2f} deg  |tau| {row['torque_mag']:.4f} N m"
+                f"  row {state['row']}  steps {r.step}  active {h.active}",
             )
-            _progress_snapshots(plan, state, row["stage"], angle, lambda tag: snapshot(tag, r.time))
+            _progress_snapshots(
+                plan, state, row["stage"], angle, lambda tag: snapshot(tag, r.time), t=r.time
+            )
             check_stop(f"row {state['row']} (t = {r.time:.6g} s)")
 
         try:
@@ -1051,6 +1246,7 @@ def _run_explicit(
                 safety=sv["safety"],
                 recheck_every=sv["recheck_every"],
                 clock=start["clock"],
+                work=start["work"],
                 first_step=start["step"],
                 velocity=start["v"],
                 acceleration=start["a"],
@@ -1059,13 +1255,16 @@ def _run_explicit(
             )
             snapshot("final", t_end)
         except (DynamicsDivergence, FloatingPointError) as exc:
-            t_stop = fc.time
+            t_stop = state["t_last"]
             snapshot(f"stopped_{angle_at(t_stop):04.1f}deg", t_stop)
             raise SolverDivergence(
                 f"explicit run stopped at t = {t_stop:.6g} s ({angle_at(t_stop):.2f} deg): {exc}"
             ) from None
         finally:
+            progress.close()
             _end_together(comm)
             if o["png"] and comm.rank == 0 and writer.csv_path.exists():
-                _torque_plot(writer.csv_path, out / "torque_angle.png", name)
+                if scene["body"]:
+                    _torque_plot(writer.csv_path, out / "torque_angle.png", name)
+                _animation(scene, out, lambda t: bodies_at(t)[0])
     return out

@@ -15,8 +15,10 @@ increment Lagrange multipliers (Eqs. 22-25) against the moving ellipsoids, with 
 friction and the paper's non-resilient contact velocities. The implicit path (Newmark with
 Lagrange multipliers and an active set) is `--set solver.integrator=newmark`. Written as the
 run goes: `history.csv` (one row per 0.01 s), `fabric.xdmf`, `snapshot_*.png`,
-`torque_angle.png`, `summary.json`, restart checkpoints. If the run stops before 57 deg,
-the rows and pictures up to there are kept and the summary says where and why.
+`torque_angle.png`, `animation.gif`, `summary.json`, restart checkpoints. If the run stops
+before 57 deg, the rows and pictures up to there are kept and the summary says where and why.
+A second run into the same folder replaces the first one's files (`clothfem run` asks for
+`--overwrite` instead); a folder holding other files is refused.
 """
 
 import argparse
@@ -42,7 +44,7 @@ scene = scenes.load(args.scene, args.set)
 # 2. Run it (dynamic settling, then the flexion). A stop below the smallest step is a result
 #    too: the rows written so far are kept.
 try:
-    run_scene(scene, args.out)
+    run_scene(scene, args.out, overwrite=True)
 except SolverDivergence as exc:
     rank0_print(f"stopped early: {exc}")
 

@@ -1,0 +1,375 @@
+"""What a run writes and where: results folders are never mixed, a failed start writes
+nothing, a killed run leaves readable files, a resumed run repeats the uninterrupted one bit
+for bit from any checkpoint and continues its field series, the XDMF series opens in meshio's
+and VTK's readers, and the scenes without a hinge (a free drape, a motion-captured arm) run
+from their files alone."""
+
+import csv
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from clothfem import scene as scenes
+from clothfem import scenes_arm
+from clothfem.cli import main
+from clothfem.run import RUN_FILES, check_output, clear_output, run_scene
+from clothfem.scene import SceneError
+
+COMM = MPI.COMM_WORLD
+ROOT = Path(__file__).resolve().parents[2]
+CI = ROOT / "demos" / "scenes" / "arm_sleeve_ci.toml"
+EXPLICIT = [
+    "solver.integrator=explicit",
+    "solver.rotary_scale=1000",
+    "solver.settle_time=0.05",
+    "solver.ramp_time=0.05",
+    "body.1.angle_max=3.0",
+    "output.interval=0.004",
+    "output.checkpoint_every=1",
+]
+NEWMARK = [
+    "solver.integrator=newmark",
+    "solver.settle_time=0.05",
+    "solver.ramp_time=0.05",
+    "solver.dt=0.005",
+    "body.1.angle_max=3.0",
+    "output.checkpoint_every=1",
+]
+TIMING = ("t_assembly", "t_contact", "t_solve", "t_io", "wall_time", "elapsed")
+# a child process must not inherit this (singleton) MPI process's environment
+ENV = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
+ENV["OPENBLAS_NUM_THREADS"] = "1"
+
+
+def _shared(tmp_path: Path) -> Path:
+    return Path(COMM.bcast(str(tmp_path) if COMM.rank == 0 else None, root=0))
+
+
+def _rows(out: Path) -> list[dict[str, str]]:
+    return list(csv.DictReader((out / "history.csv").open()))
+
+
+def _series(out: Path) -> tuple[list[float], list[dict[str, np.ndarray]]]:
+    """Times and point data of ``out/fabric.xdmf`` through meshio's time-series reader."""
+    import meshio
+
+    times, data = [], []
+    with meshio.xdmf.TimeSeriesReader(out / "fabric.xdmf") as reader:
+        reader.read_points_cells()
+        for k in range(reader.num_steps):
+            t, point_data, _ = reader.read_data(k)
+            times.append(t)
+            data.append(point_data)
+    return times, data
+
+
+# ---------------------------------------------------------------- results folders
+
+
+def test_output_folder_rules(tmp_path):
+    """New or empty: fine. A previous run: refused, or with overwrite its files are removed
+    (and only those). Files clothfem does not write: refused, also with overwrite. A folder
+    under a file: refused. Every refusal is one line naming the folder."""
+    base = _shared(tmp_path)
+    check_output(base / "new", comm=COMM)
+    if COMM.rank == 0:
+        (base / "empty").mkdir()
+        run = base / "run"
+        (run / "checkpoint").mkdir(parents=True)
+        for name in ("history.csv", "fabric.xdmf", "fabric.h5", "snapshot_final.png"):
+            (run / name).write_text("x")
+        (run / "checkpoint" / "rank0-of-1.npz").write_text("x")
+        (base / "mixed").mkdir()
+        (base / "mixed" / "history.csv").write_text("x")
+        (base / "mixed" / "notes.txt").write_text("mine")
+        (base / "user").mkdir()
+        (base / "user" / "data.csv").write_text("mine")
+        (base / "afile").write_text("x")
+    COMM.barrier()
+    check_output(base / "empty", comm=COMM)
+    for folder, kwargs, words in [
+        ("run", {}, "holds another run"),
+        ("mixed", {}, "holds another run"),
+        ("mixed", {"overwrite": True}, "notes.txt"),
+        ("user", {}, "data.csv"),
+        ("user", {"overwrite": True}, "--overwrite refused"),
+        ("afile/out", {}, "cannot be created"),
+        ("empty", {"resume": True}, "--resume needs"),
+    ]:
+        with pytest.raises(SceneError) as err:
+            check_output(base / folder, comm=COMM, **kwargs)
+        msg = str(err.value)
+        assert "\n" not in msg and f"'{base / folder}'" in msg and words in msg, msg
+    check_output(base / "run", overwrite=True, comm=COMM)
+    clear_output(base / "run", comm=COMM)
+    assert not any((base / "run").iterdir())
+    assert (base / "mixed" / "notes.txt").read_text() == "mine"  # never touched
+    assert "history.csv" in RUN_FILES
+
+
+def test_cli_refuses_a_folder_with_a_run(tmp_path, capsys):
+    """`clothfem run` into a folder holding another run: exit 2, one line naming it, nothing
+    changed; `--overwrite` replaces the run."""
+    out = _shared(tmp_path) / "r"
+    args = ["run", str(ROOT / "demos" / "scenes" / "sleeve_gravity.toml"), "--out", str(out)]
+    args += ["--set", "mesh.n_around=4", "--set", "mesh.n_along=2", "--set", "output.png=false"]
+    assert main(args) == 0
+    before = (out / "history.csv").read_bytes()
+    capsys.readouterr()
+    assert main([*args, "--set", "solver.steps=2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and str(out) in err and "holds another run" in err
+    assert (out / "history.csv").read_bytes() == before
+    assert main([*args, "--set", "solver.steps=2", "--overwrite"]) == 0
+    assert len(_rows(out)) == 2
+
+
+def test_failed_start_writes_nothing(tmp_path, capsys):
+    """A bad scene, a mesh file that is missing or not a mesh, an output folder that cannot
+    be created: exit 2 with one line, and the output folder is not created."""
+    base = _shared(tmp_path)
+    garbage, scene = base / "garbage.msh", base / "s.toml"
+    if COMM.rank == 0:
+        garbage.write_text("this is not a gmsh file\n")
+        (base / "afile").write_text("x")
+        scene.write_text(
+            '[scene]\nname = "f"\n[mesh]\ngenerator = "file"\nfile = "MESH"\n[material]\n'
+            'preset = "crimped-cotton"\nthickness = 1e-3\n[output]\npng = false\n'
+        )
+    COMM.barrier()
+    sleeve = str(ROOT / "demos" / "scenes" / "sleeve_gravity.toml")
+    cases = [
+        (["run", sleeve, "--set", "mesh.n_around=5"], "mesh.n_around"),
+        (["run", str(scene), "--set", f"mesh.file={base / 'none.msh'}"], "mesh.file"),
+        (["run", str(scene), "--set", f"mesh.file={garbage}"], "mesh.file"),
+        (["run", sleeve, "--set", "solver.integrator=newmark"], "solver.integrator"),
+    ]
+    for k, (args, key) in enumerate(cases):
+        out = base / f"out{k}"
+        capsys.readouterr()
+        assert main([*args, "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and key in err, err
+        assert not out.exists()
+    capsys.readouterr()
+    assert main(["run", sleeve, "--out", str(base / "afile" / "out")]) == 2
+    assert "cannot be created" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- resume and field series
+
+
+def _run_keeping_checkpoints(scene, out: Path, keep: tuple[int, ...]) -> dict[int, Path]:
+    """Run ``scene`` into ``out`` and copy the checkpoint folder after the checkpoints
+    number ``keep`` (1-based) to ``out.parent / ck<k>``."""
+    original = scenes_arm._checkpoint
+    count, kept = {"k": 0}, {}
+
+    def checkpoint(folder, comm, data):
+        original(folder, comm, data)
+        count["k"] += 1
+        if count["k"] in keep:
+            dest = out.parent / f"ck{count['k']}"
+            if comm.rank == 0:
+                shutil.copytree(folder / "checkpoint", dest)
+            comm.barrier()
+            kept[count["k"]] = dest
+
+    scenes_arm._checkpoint = checkpoint
+    try:
+        run_scene(scene, out, comm=COMM)
+    finally:
+        scenes_arm._checkpoint = original
+    return kept
+
+
+def _resume_from(reference: Path, checkpoint: Path, out: Path, scene) -> None:
+    """An interrupted run's folder: the reference's history and field files (later steps
+    included, as a run killed after its checkpoint leaves them) and ``checkpoint``."""
+    if COMM.rank == 0:
+        out.mkdir()
+        for name in ("history.csv", "fabric.xdmf", "fabric.h5"):
+            shutil.copy(reference / name, out / name)
+        shutil.copytree(checkpoint, out / "checkpoint")
+    COMM.barrier()
+    run_scene(scene, out, comm=COMM, resume=True)
+
+
+def _same_history(a: list[dict[str, str]], b: list[dict[str, str]]) -> None:
+    assert len(a) == len(b)
+    for ra, rb in zip(a, b, strict=True):
+        assert {k: v for k, v in ra.items() if k not in TIMING} == {
+            k: v for k, v in rb.items() if k not in TIMING
+        }
+
+
+@pytest.mark.parametrize(
+    ("sets", "picks"),
+    [(EXPLICIT, (5, 17)), (NEWMARK, (4, 16))],
+    ids=["explicit", "newmark"],
+)
+def test_resume_bit_for_bit_from_two_checkpoints(tmp_path, sets, picks):
+    """A short run of the CI scene checkpointing every row (explicit) / step (Newmark),
+    resumed from an early and a late checkpoint: every history column (but the timers) is
+    the same string as the uninterrupted run's, and the field series holds the same times
+    once each with the same displacement. The late Newmark checkpoint is one where the
+    bordered contact matrix keeps slots of pairs that left the active set (before they were
+    checkpointed, a resume from there differed by 1e-12 and took other Newton counts)."""
+    base = _shared(tmp_path)
+    scene = scenes.load(CI, sets)
+    kept = _run_keeping_checkpoints(scene, base / "reference", picks)
+    reference = _rows(base / "reference")
+    t_ref, f_ref = _series(base / "reference")
+    if COMM.size == 1 and "newmark" in sets[0]:
+        with np.load(kept[picks[1]] / "rank0-of-1.npz") as z:
+            assert len(z["contact_kkt_slots"]) > int(z["contact_active"].sum())
+    for k in picks:
+        out = base / f"resumed{k}"
+        _resume_from(base / "reference", kept[k], out, scene)
+        _same_history(reference, _rows(out))
+        times, fields = _series(out)
+        assert times == t_ref and len(set(times)) == len(times)
+        for a, b in zip(f_ref, fields, strict=True):
+            assert np.array_equal(a["displacement"], b["displacement"])
+            assert np.array_equal(a["contact_pressure"], b["contact_pressure"])
+
+
+def test_field_series_in_both_readers(tmp_path):
+    """The explicit run's fabric.xdmf: meshio's time-series reader and pyvista's XdmfReader
+    (VTK, as ParaView) both see displacement and contact pressure at every written time; the
+    times are positive and increasing, and the last one is the end of the run."""
+    import pyvista as pv
+
+    base = _shared(tmp_path)
+    sets = [*EXPLICIT, "output.every=4", "output.checkpoint_every=0"]
+    scene = scenes.load(CI, sets)
+    out = run_scene(scene, base / "r", comm=COMM)
+    rows = _rows(out)
+    times, fields = _series(out)
+    assert len(times) == len(rows) // 4 + (len(rows) % 4 != 0)
+    assert times[0] > 0 and all(b > a for a, b in zip(times, times[1:], strict=False))
+    assert times[-1] == float(rows[-1]["time"])  # the final state is always written
+    for f in fields:
+        assert f["displacement"].shape[1] == 3 and f["contact_pressure"].ndim == 1
+    assert np.max(fields[-1]["contact_pressure"]) > 0
+    reader = pv.XdmfReader(str(out / "fabric.xdmf"))
+    assert list(reader.time_values) == times
+    for t in (times[0], times[-1]):
+        reader.set_active_time_value(t)
+        grid = reader.read()
+        assert {"displacement", "contact_pressure"} <= set(grid.point_data.keys())
+
+
+def test_quasi_static_body_series_has_no_negative_times(tmp_path):
+    """The quasi-static path writes the settled state at t = 0 and the motion after it."""
+    base = _shared(tmp_path)
+    scene = scenes.load(CI, ["body.1.angle_max=1.0", "contact.increments=2", "solver.steps=1"])
+    out = run_scene(scene, base / "s", comm=COMM)
+    times, fields = _series(out)
+    assert times[0] == 0.0 and all(b > a for a, b in zip(times, times[1:], strict=False))
+    assert times[-1] == pytest.approx(float(_rows(out)[-1]["time"]))
+    assert all("contact_pressure" in f for f in fields)
+
+
+# ---------------------------------------------------------------- killed runs, pictures
+
+
+def _cli(out: Path, scene: Path, *args: str) -> list[str]:
+    return [sys.executable, "-m", "clothfem.cli", "run", str(scene), "--out", str(out), *args]
+
+
+@pytest.mark.serial
+@pytest.mark.skipif(COMM.size > 1, reason="launches its own process")
+def test_sigkill_leaves_readable_files_and_resume_continues(tmp_path):
+    """SIGKILL an explicit run once it has written rows and field steps: history.csv and the
+    XDMF/HDF5 series read back (meshio) up to the last written step; `--resume` continues the
+    same series to the end without a duplicated time."""
+    out = tmp_path / "killed"
+    sets = [a for s in [*EXPLICIT[:-1], "output.checkpoint_every=3"] for a in ("--set", s)]
+    proc = subprocess.Popen(
+        _cli(out, CI, *sets), env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and proc.poll() is None:
+        path = out / "history.csv"
+        if path.exists() and path.read_text().count("\n") >= 10:
+            proc.send_signal(signal.SIGKILL)
+            break
+        time.sleep(0.02)
+    proc.wait(timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    rows = _rows(out)
+    assert len(rows) >= 9 and all(r["elapsed"] for r in rows)
+    times, fields = _series(out)
+    assert len(times) >= 9 and {"displacement", "contact_pressure"} <= set(fields[-1])
+    assert times == sorted(set(times))
+    res = subprocess.run(
+        [*_cli(out, CI, *sets), "--resume"], env=ENV, capture_output=True, text=True, timeout=600
+    )
+    assert res.returncode == 0, res.stderr[-2000:]
+    rows = _rows(out)
+    times, _ = _series(out)
+    assert times == sorted(set(times)) and len(times) == len(rows)
+    assert times[-1] == float(rows[-1]["time"])
+    assert float(rows[-1]["angle_deg"]) == pytest.approx(3.0)
+
+
+@pytest.mark.serial
+@pytest.mark.skipif(COMM.size > 1, reason="launches its own process")
+def test_pictures_animation_and_progress(tmp_path):
+    """A run with pictures off a terminal: plain progress lines with an ETA, no VTK X-server
+    warning; snapshots (coloured by contact pressure, with a colour bar) and animation.gif
+    with one frame per written field step."""
+    from PIL import Image
+
+    out = tmp_path / "pics"
+    sets = [*EXPLICIT[:-1], "output.png=true", "output.every=5", "output.checkpoint_every=0"]
+    args = [a for s in sets for a in ("--set", s)]
+    res = subprocess.run(_cli(out, CI, *args), env=ENV, capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "ETA" in res.stdout and "X server" not in res.stderr
+    for name in ("snapshot_settled.png", "snapshot_final.png", "torque_angle.png"):
+        assert (out / name).stat().st_size > 0
+    times, _ = _series(out)
+    with Image.open(out / "animation.gif") as gif:
+        assert gif.n_frames == len(times) >= 2
+
+
+# ---------------------------------------------------------------- scenes from files alone
+
+
+def test_free_drape_scene(tmp_path):
+    """demos/scenes/drape_free.toml (no body, explicit) for 0.02 s: the cloth falls."""
+    base = _shared(tmp_path)
+    scene = scenes.load(ROOT / "demos" / "scenes" / "drape_free.toml", ["solver.duration=0.02"])
+    out = run_scene(scene, base / "drape", comm=COMM)
+    rows = _rows(out)
+    assert len(rows) == 2 and float(rows[-1]["time"]) == pytest.approx(0.02)
+    assert float(rows[-1]["kinetic_energy"]) > 0 and int(rows[-1]["n_active"]) == 0
+    times, fields = _series(out)
+    uz = fields[-1]["displacement"][:, 2]
+    assert times[-1] == pytest.approx(0.02) and uz.min() < -1e-3  # ~ g t^2 / 2 = 2 mm
+
+
+def test_mocap_scene(tmp_path):
+    """demos/scenes/sleeve_mocap.toml (an arm moved by the C3D file) past the settling into
+    the recording: the forearm follows the recorded elbow flexion, the run writes its rows."""
+    base = _shared(tmp_path)
+    sets = ["solver.settle_time=0.01", "solver.ramp_time=0.01", "solver.duration=0.03"]
+    sets += ["mesh.n_around=8", "mesh.n_along=4", "output.png=false"]
+    scene = scenes.load(ROOT / "demos" / "scenes" / "sleeve_mocap.toml", sets)
+    motions = scenes_arm.body_motions(scene)
+    e1 = [motions[1].pose(t).rotation[:, 0] for t in (0.0, 0.8)]
+    assert np.degrees(np.arccos(np.clip(e1[0] @ e1[1], -1, 1))) > 60  # 27 -> 114 deg flexion
+    out = run_scene(scene, base / "mocap", comm=COMM)
+    rows = _rows(out)
+    assert len(rows) == 3 and rows[-1]["stage"] == "motion"
+    assert all(np.isfinite(float(r["torque_mag"])) for r in rows)
