@@ -1,13 +1,16 @@
 """Fabric self-contact for the explicit integrator: proximity corrections consistent with FILM
-plus a continuous-collision fail-safe (pure NumPy and SciPy; the MPI wrapper at the end).
+plus a continuous-collision fail-safe (NumPy and SciPy; the MPI wrapper at the end).
 
 Pipeline (each stage a small function on whole arrays):
 
-surface (8 triangles per 9-node cell) -> candidate list (cKDTree broad phase, kept while no
-node moved more than half the skin) -> point-triangle gaps and side-aware normals -> position
-projection (mass-weighted, Eq. 25 per pair) -> inelastic normal impulses -> Coulomb friction
-impulses -> continuous crossing check over the step (point-triangle and edge-edge) -> impact
-zones -> diagnostics.
+surface (8 triangles per 9-node cell) -> candidate list (cKDTree broad phase, kept while the
+relative motion of nearby nodes stays below the skin) -> node-triangle (and edge-edge) gaps
+and side-aware normals -> position projection (mass-weighted, Eq. 25 per pair) -> inelastic
+normal impulses -> Coulomb friction impulses -> continuous crossing check over the step
+(node-triangle and edge-edge) -> impact zones -> diagnostics.
+
+The response stages run as projected Gauss-Seidel sweeps compiled by numba (Debian's
+python3-numba) when it imports, else as an accelerated projected Jacobi in NumPy.
 
 Conventions:
 
@@ -207,10 +210,10 @@ def _unit_normals(x: FloatArray, tri: IntArray) -> FloatArray:
 @dataclass(frozen=True)
 class CandidateList:
     """Pairs that can come within the contact distance (point-triangle) or cross (edge-edge)
-    while every node stays within ``skin / 2`` [m] of ``x_build`` (a Verlet list): the node
-    ``pt_node`` against triangle ``pt_tri`` at distance ``pt_dist`` [m] at build, and edges
-    ``ee[:, 0]``, ``ee[:, 1]`` (rows of the surface's edges) at ``ee_dist`` [m]; the
-    nodes of each pair in ``pt_nodes`` and ``ee_nodes``."""
+    while the relative motion since ``x_build`` stays small (a Verlet list, :meth:`valid`):
+    the node ``pt_node`` against triangle ``pt_tri`` at distance ``pt_dist`` [m] at build,
+    edges ``ee[:, 0]``, ``ee[:, 1]`` (rows of the surface's edges) at ``ee_dist`` [m]; the
+    nodes of each pair in ``pt_nodes`` and ``ee_nodes``; the tiles of :func:`_tiles`."""
 
     x_build: FloatArray
     skin: float
@@ -221,15 +224,80 @@ class CandidateList:
     ee_dist: FloatArray
     pt_nodes: IntArray  # (M, 4) the node and the triangle's nodes of each pair
     ee_nodes: IntArray  # (K, 4) the nodes of both edges of each pair
+    tiles: Tiles
 
     def valid(self, *xs: FloatArray) -> bool:
-        """Whether every node of every configuration ``xs`` is within skin / 2 of the build."""
-        lim = 0.5 * self.skin
-        return all(float(np.max(_moved(x, self.x_build), initial=0.0)) <= lim for x in xs)
+        """Whether no unlisted pair can be within ``distance`` (or cross) at any of ``xs``.
+
+        A pair's distance changes by at most the largest relative displacement (since the
+        build) of a node of one side and a node of the other. Nodes in the same or adjacent
+        tiles (edge ``R``) stay within ``skin`` of each other's displacement when each
+        node's displacement from its tile's mean plus the difference of the tile means do;
+        nodes farther apart were at least ``R - L`` from each other's pairs (``L`` the longest
+        edge) and stay apart while no node moved more than ``(R - L - distance) / 2``. Rigid
+        motion of a region costs nothing but the rotation across a few tiles."""
+        return all(self.tiles.spread(x - self.x_build) <= self.skin for x in xs)
+
+
+class Tiles(NamedTuple):
+    """Cubes of edge ``size`` [m] holding the nodes at build: ``tile`` (N,) of each node,
+    ``order``/``starts`` the nodes sorted by tile, ``pairs`` (P, 2) the tiles touching each
+    other (and themselves), ``far`` [m] the largest displacement allowed to any node."""
+
+    size: float
+    tile: IntArray
+    order: IntArray
+    starts: IntArray
+    pairs: IntArray
+    far: float
+
+    def spread(self, D: FloatArray) -> float:
+        """The relative-displacement bound of nodes in touching tiles for displacements
+        ``D`` (N, 3) [m], inf when a node moved more than ``far``."""
+        if float(np.max(np.einsum("ij,ij->i", D, D), initial=0.0)) > self.far**2:
+            return np.inf
+        cnt = np.bincount(self.tile)
+        mean = np.stack([np.bincount(self.tile, D[:, k]) for k in range(3)], 1) / cnt[:, None]
+        r = np.linalg.norm(D - mean[self.tile], axis=1)
+        rmax = np.maximum.reduceat(r[self.order], self.starts)
+        a, b = self.pairs[:, 0], self.pairs[:, 1]
+        dm = np.linalg.norm(mean[a] - mean[b], axis=1)
+        return float(np.max(rmax[a] + dm + rmax[b], initial=0.0))
+
+
+def _tiles(x: FloatArray, *, longest: float, distance: float) -> Tiles:
+    """Tiles of edge ``3 longest + distance`` over the nodes ``x`` and their touching pairs."""
+    size = 3.0 * longest + distance
+    key = np.floor(x / size).astype(np.int64)
+    key -= key.min(axis=0) - 1
+    base = int(key.max()) + 2
+    code = (key[:, 0] * base + key[:, 1]) * base + key[:, 2]
+    uniq, tile = np.unique(code, return_inverse=True)
+    k3 = np.stack([uniq // (base * base), (uniq // base) % base, uniq % base], 1)
+    pairs = []
+    for off in np.stack(np.meshgrid(*[[-1, 0, 1]] * 3, indexing="ij"), -1).reshape(-1, 3):
+        kk = k3 + off
+        c = (kk[:, 0] * base + kk[:, 1]) * base + kk[:, 2]
+        j = np.minimum(np.searchsorted(uniq, c), len(uniq) - 1)
+        hit = np.flatnonzero(uniq[j] == c)
+        pairs.append(np.column_stack([hit, j[hit]]))
+    p = np.concatenate(pairs)
+    order = np.argsort(tile, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(tile[order]) != 0])
+    far = 0.5 * (size - longest - distance)
+    return Tiles(size, tile, order, starts, p[p[:, 0] <= p[:, 1]], far)
 
 
 def _moved(x: FloatArray, x_ref: FloatArray) -> FloatArray:
     return np.sqrt(np.einsum("ij,ij->i", x - x_ref, x - x_ref))
+
+
+def _relative_motion(D: FloatArray, g: IntArray, split: int) -> FloatArray:
+    """Largest ``|D_i - D_k|`` (M,) [m] over the nodes ``i`` of one side (the first ``split``
+    columns of ``g``) and ``k`` of the other: a bound on the change of the pair's distance."""
+    Dg = D[g]
+    diff = Dg[:, :split, None, :] - Dg[:, None, split:, :]
+    return np.sqrt(np.max(np.einsum("mabk,mabk->mab", diff, diff), axis=(1, 2), initial=0.0))
 
 
 def _far(surface: FabricSurface, a: IntArray, b: IntArray) -> NDArray[np.bool_]:
@@ -272,6 +340,7 @@ def build_candidates(
     return CandidateList(
         x.copy(), float(skin), node[keep], t[keep], dist[keep], ee[close], ed[close],
         np.column_stack([node[keep], tri[t[keep]]]), edge[ee[close]].reshape(-1, 4),
+        _tiles(x, longest=length, distance=distance),
     )  # fmt: skip
 
 
@@ -691,15 +760,15 @@ def edge_edge_crossings(
 
 def _crossings(cands: CandidateList, surface, x0, x1, eps) -> tuple[IntArray, IntArray]:
     """Node groups (rows of 4) of the point-triangle and edge-edge pairs that cross. Two
-    filters before the cubic: the build distance less twice the largest motion of the
-    pair's nodes from the build (at either end of the step, so along it), then the distance
-    at ``x1`` less the pair's motion over the step (a pair's distance changes by at most the
-    largest displacement of one side plus that of the other)."""
-    moved = np.maximum(_moved(x0, cands.x_build), _moved(x1, cands.x_build))
-    step = _moved(x1, x0)
+    filters before the cubic (:func:`_relative_motion` bounds the change of a pair's
+    distance): the distance at ``x1`` is at least the build distance less the relative
+    motion since the build, and changes along the step by at most twice the largest step of
+    a node; then the exact distance at ``x1`` less the pair's relative motion over it."""
+    D1, step = x1 - cands.x_build, x1 - x0
+    reach = eps + 2.0 * float(np.max(_moved(x1, x0), initial=0.0))
     out = []
     for g, dist0, split in ((cands.pt_nodes, cands.pt_dist, 1), (cands.ee_nodes, cands.ee_dist, 2)):
-        s = np.flatnonzero(dist0 - 2 * moved[g].max(axis=1) <= eps)
+        s = np.flatnonzero(dist0 - _relative_motion(D1, g, split) <= reach)
         if s.size:
             gs = g[s]
             if split == 1:
@@ -707,9 +776,11 @@ def _crossings(cands: CandidateList, surface, x0, x1, eps) -> tuple[IntArray, In
                 dist = np.linalg.norm(x1[gs[:, 0]] - q, axis=1)
             else:
                 dist = segment_distance(*(x1[gs[:, k]] for k in range(4)))
-            s = s[dist <= step[gs[:, :split]].max(1) + step[gs[:, split:]].max(1) + eps]
+            s = s[dist <= _relative_motion(step, gs, split) + eps]
         out.append(s)
     s_pt, s_ee = out
+    if s_pt.size + s_ee.size == 0:
+        return np.zeros((0, 4), dtype=np.intp), np.zeros((0, 4), dtype=np.intp)
     h_pt = point_triangle_crossings(x0, x1, surface, cands.pt_node[s_pt], cands.pt_tri[s_pt], eps)
     h_ee = edge_edge_crossings(x0, x1, surface, cands.ee[s_ee], eps)
     return cands.pt_nodes[s_pt[h_pt]], cands.ee_nodes[s_ee[h_ee]]
@@ -825,9 +896,10 @@ class SelfContactResult(NamedTuple):
     candidates: CandidateList
 
 
-def _list_for(cands, x_now, x_other, surface, p: SelfContactParameters) -> tuple:
-    """The candidate list valid for ``x_now`` and ``x_other`` (rebuilt at ``x_now`` if not)."""
-    if cands is not None and cands.valid(x_now, x_other):
+def _list_for(cands, x_now, x_other, surface, p: SelfContactParameters, both=True) -> tuple:
+    """The candidate list valid for ``x_now`` and ``x_other`` (rebuilt at ``x_now`` if not;
+    ``both=False``: ``x_other`` is known to be valid for ``cands``)."""
+    if cands is not None and cands.valid(*((x_now, x_other) if both else (x_now,))):
         return cands, False
     span = float(np.max(_moved(x_now, x_other), initial=0.0))
     skin = max(p.skin_length, 4.0 * span)  # the list outlives this step
@@ -886,16 +958,16 @@ def self_contact_step(
 
 def _contacts_now(x0, xs, surface, cands: CandidateList, d, tol, edges: bool) -> PairContacts:
     """Node-triangle and edge pairs closer than ``d + tol`` at ``xs`` (per node / first
-    edge the closest on each side), after the list's bound: build distance less twice the
-    largest motion of the pair's nodes since the build."""
-    moved = _moved(xs, cands.x_build)
-    sel = np.flatnonzero(cands.pt_dist - 2 * moved[cands.pt_nodes].max(axis=1) < d)
+    edge the closest on each side), after the list's bound: build distance less the pair's
+    relative motion since the build."""
+    D = xs - cands.x_build
+    sel = np.flatnonzero(cands.pt_dist - _relative_motion(D, cands.pt_nodes, 1) < d)
     c = pair_contacts(x0, xs, surface, cands.pt_node[sel], cands.pt_tri[sel])
     c = PairContacts(*(a[c.gap < d + tol] for a in c))
     c = _closest_per_key(c, c.idx[:, 0])
     if not edges:
         return c
-    sel = np.flatnonzero(cands.ee_dist - 2 * moved[cands.ee_nodes].max(axis=1) < d)
+    sel = np.flatnonzero(cands.ee_dist - _relative_motion(D, cands.ee_nodes, 2) < d)
     ce = edge_contacts(x0, xs, surface, cands.ee[sel])
     close = ce.gap < d + tol
     ce = _closest_per_key(PairContacts(*(a[close] for a in ce)), cands.ee[sel][close, 0])
@@ -909,11 +981,11 @@ def _speed(v: FloatArray) -> float:
 def _failsafe(x0, x, v, m, fx, surface, cands, p: SelfContactParameters):
     """Crossing check over the step and impact zones until none is left (or the passes are
     used up): positions, velocities, crossings of the first and last pass, zone nodes, the
-    candidate list (rebuilt if a correction moved a node past half the skin)."""
+    candidate list (rebuilt if a correction made it invalid)."""
     eps = p.eps * p.distance
     found, links, zone = -1, np.zeros((0, 4), dtype=np.intp), np.zeros(0, dtype=np.intp)
     for _ in range(p.failsafe_passes):
-        cands, _ = _list_for(cands, x, x0, surface, p)
+        cands, _ = _list_for(cands, x, x0, surface, p, both=False)
         pt, ee = _crossings(cands, surface, x0, x, eps)
         count = len(pt) + len(ee)
         found = count if found < 0 else found
@@ -922,7 +994,7 @@ def _failsafe(x0, x, v, m, fx, surface, cands, p: SelfContactParameters):
         links = np.concatenate([links, pt, ee])
         x, v = x.copy(), v.copy()
         zone = _impact_zones(x0, x, v, m, fx, links)
-    cands, _ = _list_for(cands, x, x0, surface, p)
+    cands, _ = _list_for(cands, x, x0, surface, p, both=False)
     pt, ee = _crossings(cands, surface, x0, x, eps)
     return x, v, found, len(pt) + len(ee), len(zone), cands
 

@@ -202,3 +202,31 @@ def test_both_response_solvers_separate_and_conserve_momentum(strip, kernel):
     assert gap.min() >= (1 - p.tolerance) * 1e-3
     np.testing.assert_allclose((m[:, None] * (r.v - v)).sum(0), 0.0, atol=1e-16)
     np.testing.assert_allclose((m[:, None] * (r.x - x0 - dt * v)).sum(0), 0.0, atol=1e-18)
+
+
+def test_candidate_list_survives_rigid_motion_and_stays_complete():
+    """The list stays valid under a rigid translation larger than its skin, turns invalid
+    when layers move relative to each other by more than the skin, and while valid it holds
+    every node-triangle pair closer than d (compared with a fresh build)."""
+    sm = meshes.strip(MPI.COMM_SELF, length=0.04, width=0.02, nx=4, ny=2)
+    X, cells = sc.mesh_nodes(sm.mesh)
+    n = len(X)
+    x = np.vstack([X, X + [0.0, 0.0, 1.05e-3]])
+    surf = sc.fabric_surface(np.vstack([cells, cells + n]), n_nodes=2 * n)
+    c = sc.build_candidates(x, surf, distance=1e-3, skin=1e-3)
+    assert c.valid(x + [3e-3, -2e-3, 1e-3])  # rigid, 3.7 mm > skin
+    shear = x.copy()
+    shear[n:, 0] += 1.2e-3  # the top layer slides by more than the skin
+    assert not c.valid(shear)
+    listed = set(zip(c.pt_node.tolist(), c.pt_tri.tolist(), strict=True))
+    checked = 0
+    for _ in range(20):
+        moved = x + RNG.normal(scale=1e-4, size=x.shape) + RNG.normal(scale=2e-3, size=3)
+        if not c.valid(moved):
+            continue
+        checked += 1
+        fresh = sc.build_candidates(moved, surf, distance=1e-3, skin=1e-9)
+        close = fresh.pt_dist < 1e-3
+        found = zip(fresh.pt_node[close].tolist(), fresh.pt_tri[close].tolist(), strict=True)
+        assert close.any() and set(found) <= listed
+    assert checked >= 5
