@@ -345,12 +345,19 @@ def _pyplot():
     return plt
 
 
-def _clim(scalars: np.ndarray) -> tuple[float, float]:
+def _clim(scalars: np.ndarray, *, robust: bool = False) -> tuple[float, float]:
+    """The colour range: min to max, or (``robust``, for contact pressures that peak at a few
+    nodes) 0 to the 95th percentile of the positive values."""
     lo, hi = float(np.min(scalars)), float(np.max(scalars))
+    if robust:
+        pos = scalars[scalars > 0]
+        lo, hi = 0.0, float(np.percentile(pos, 95)) if len(pos) else 0.0
     return (lo, hi) if hi > lo else (lo, lo + 1.0)
 
 
-def _with_colour_bar(image: np.ndarray, *, clim: tuple[float, float], label: str, title: str):
+def _with_colour_bar(
+    image: np.ndarray, *, clim: tuple[float, float], label: str, title: str, extend: str
+):
     """A matplotlib figure of a rendered ``image`` with a colour bar of ``clim`` (the caller
     saves and closes it)."""
     plt = _pyplot()
@@ -364,7 +371,7 @@ def _with_colour_bar(image: np.ndarray, *, clim: tuple[float, float], label: str
     if title:
         ax.set_title(title, fontsize=10)
     bar = ScalarMappable(norm=Normalize(*clim), cmap=CMAP)
-    fig.colorbar(bar, ax=ax, fraction=0.04, pad=0.02, label=label)
+    fig.colorbar(bar, ax=ax, fraction=0.04, pad=0.02, label=label, extend=extend)
     fig.tight_layout()
     return fig
 
@@ -411,7 +418,7 @@ def snapshot_png(
         scalars, label = p[:, 0], "contact pressure [Pa]"
     else:
         scalars, label = np.linalg.norm(u, axis=1), "|u| [m]"
-    clim = _clim(scalars)
+    clim = _clim(scalars, robust=p is not None)
     _render(
         plotter,
         layout.points + u,
@@ -423,7 +430,8 @@ def snapshot_png(
     _camera(plotter, view)
     image = plotter.screenshot(return_img=True)
     plotter.close()
-    fig = _with_colour_bar(image, clim=clim, label=label, title=title)
+    extend = "max" if p is not None else "neither"
+    fig = _with_colour_bar(image, clim=clim, label=label, title=title, extend=extend)
     fig.savefig(path)
     plt.close(fig)
 
@@ -455,8 +463,8 @@ def animate_series(
     steps = [steps[int(i)] for i in pick]
     has_p = all("contact_pressure" in f for _, f in steps)
     if has_p:
-        hi = max(float(np.max(f["contact_pressure"])) for _, f in steps)
-        clim, label = (0.0, hi if hi > 0 else 1.0), "contact pressure [Pa]"
+        every = np.concatenate([f["contact_pressure"] for _, f in steps])
+        clim, label = _clim(every, robust=True), "contact pressure [Pa]"
     else:
         hi = max(float(np.linalg.norm(f["displacement"], axis=1).max()) for _, f in steps)
         clim, label = (0.0, hi if hi > 0 else 1.0), "|u| [m]"
@@ -481,7 +489,13 @@ def animate_series(
             plotter.camera = camera.copy()
         image = plotter.screenshot(return_img=True)
         plotter.close()
-        fig = _with_colour_bar(image, clim=clim, label=label, title=f"{title}  t = {t:.4g}")
+        fig = _with_colour_bar(
+            image,
+            clim=clim,
+            label=label,
+            title=f"{title}  t = {t:.4g}",
+            extend="max" if has_p else "neither",
+        )
         frames.append(Image.fromarray(_figure_array(fig)))
         plt.close(fig)
     gif = Path(gif)

@@ -716,6 +716,9 @@ def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
                     _fail(f"body[{i}].{k}", "is a key of type = 'mocap' segments only")
             continue
         key = f"body[{i}]"
+        for k in ("joint", "hinge_axis", "angle_max"):
+            if seg[k] is not None:
+                _fail(f"{key}.{k}", "is a key of type = 'hinge' segments only")
         path = Path(seg["file"])
         if not path.is_absolute() and not path.is_file() and base is not None:
             path = base / path
@@ -813,8 +816,6 @@ def _validate_body(data: dict[str, Any], out: dict[str, Any]) -> None:
         ]
         if math.hypot(*cross) <= 1e-9 * math.hypot(*axis) * math.hypot(*up):
             _fail(f"body[{i}].up", f"must not be parallel to axis {axis!r}, got {up!r}")
-        if seg["type"] == "mocap" and seg["max_gap"] < 0:
-            _fail(f"body[{i}].max_gap", "must be >= 0")
         if seg["type"] == "hinge" and math.hypot(*seg["hinge_axis"]) == 0:
             _fail(f"body[{i}].hinge_axis", "must be a non-zero vector, got [0, 0, 0]")
         if seg["type"] == "hinge" and 0.5 * seg["omega"] * seg["omega_ramp"] > seg["angle_max"]:

@@ -370,13 +370,15 @@ def _torque_columns(tau: np.ndarray, res: np.ndarray, hinge_axis: np.ndarray) ->
     }
 
 
-def _ellipsoid_meshes(bodies) -> list:
-    """pyvista surfaces of ellipsoids given as (centre, axes as columns, radii)."""
+def _ellipsoid_meshes(bodies, *, scale: float = 0.985) -> list:
+    """pyvista surfaces of ellipsoids given as (centre, axes as columns, radii), drawn with
+    the radii x ``scale``: contact holds the fabric's nodes on the surface and the flat facets
+    of the drawn fabric between them would otherwise cut into the body."""
     import pyvista as pv
 
     meshes = []
     for c, Q, r in bodies:
-        e = pv.ParametricEllipsoid(*r, u_res=40, v_res=20, w_res=10)
+        e = pv.ParametricEllipsoid(*(scale * np.asarray(r)), u_res=60, v_res=30, w_res=10)
         e.points = np.asarray(e.points) @ Q.T + c
         meshes.append(e)
     return meshes

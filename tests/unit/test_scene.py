@@ -166,3 +166,45 @@ def test_failed_run_keeps_written_steps(tmp_path, capsys):
     assert "Newton failed at load factor" in capsys.readouterr().err
     rows = list(csv.DictReader((out / "history.csv").open()))
     assert len(rows) >= 2 and all(0 < float(r["load_factor"]) < 1 for r in rows)
+
+
+MOCAP = ROOT / "demos" / "scenes" / "sleeve_mocap.toml"
+
+
+@pytest.mark.parametrize(
+    "override, key, words",
+    [
+        ("body.0.file=nowhere.c3d", "body[0].file", "does not exist"),
+        ("body.1.m=LARM_ANT", "body[1].m", "'LARM_ANT' is not in the file"),
+        ("body.0.j1={midpoint=['EPICl','NOPE']}", "body[0].j1", "'NOPE' is not in the file"),
+        ("body.0.window=[0.0,9.0]", "body[0].window", "within the recording [0, 5.79] s"),
+        ("body.0.window=[0.5,0.2]", "body[0].window", "start < end"),
+        ("body.1.placed_by='torso'", "body[1].placed_by", "must name a mocap segment"),
+        ("body.0.hinge_axis=[0,1,0]", "body[0].hinge_axis", "type = 'hinge' segments only"),
+        ("body.0.max_gap=-1", "body[0].max_gap", "must be an integer in [0, inf]"),
+    ],
+)
+def test_mocap_segments_checked_at_load(override, key, words, capsys):
+    """A mocap segment's file, markers, window and placing segment are checked when the scene
+    is loaded: one line naming the key; `clothfem validate` exits with 2."""
+    with pytest.raises(scenes.SceneError) as info:
+        scenes.load(MOCAP, [override])
+    msg = str(info.value)
+    assert "\n" not in msg and f"'{key}'" in msg and words in msg, msg
+    assert main(["validate", str(MOCAP), "--set", override]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_mocap_file_relative_to_the_scene():
+    """The scene's relative recording path resolves from the scene file's folder."""
+    s = scenes.load(MOCAP)
+    assert Path(s["body"][0]["file"]).is_file() and s["body"][1]["placed_by"] == "upper_arm"
+
+
+def test_dynamic_scene_without_a_moving_body_needs_a_duration():
+    data = _with("solver.integrator", "explicit")
+    data["material"]["rho"] = 400.0
+    with pytest.raises(scenes.SceneError, match=r"'solver.duration': required"):
+        scenes.validate(data)
+    data["solver"]["duration"] = 0.1
+    assert scenes.validate(data)["solver"]["duration"] == 0.1
