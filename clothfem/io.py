@@ -436,6 +436,23 @@ def snapshot_png(
     plt.close(fig)
 
 
+def _colour_bar_panel(
+    *, height: int, clim: tuple[float, float], label: str, extend: str
+) -> np.ndarray:
+    """An RGB image (height x ~1.6 in) of a vertical colour bar of ``clim``."""
+    plt = _pyplot()
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    fig = plt.figure(figsize=(1.6, height / 100), dpi=100)
+    ax = fig.add_axes((0.08, 0.08, 0.18, 0.84))
+    bar = ScalarMappable(norm=Normalize(*clim), cmap=CMAP)
+    fig.colorbar(bar, cax=ax, label=label, extend=extend)
+    image = _figure_array(fig)
+    plt.close(fig)
+    return image[:height]
+
+
 def animate_series(
     h5: str | Path,
     gif: str | Path,
@@ -449,12 +466,11 @@ def animate_series(
     """A GIF of a field series (rank 0 only, no MPI): the deformed fabric at up to
     ``max_frames`` written times, coloured by the contact pressure when the series has it
     (one colour scale for the whole run), with the pyvista meshes ``bodies_at(t)`` (the body)
-    drawn opaque; the camera is fixed by the first frame. None when the series has < 2 steps."""
+    drawn opaque; the camera is fixed by the first frame. None when the series has < 2 steps.
+    One render window for all frames (the meshes are updated in place)."""
     _use_offscreen_gl()
     import pyvista as pv
     from PIL import Image
-
-    plt = _pyplot()
 
     points, cells, steps = read_series(h5)
     if len(steps) < 2:
@@ -468,36 +484,46 @@ def animate_series(
     else:
         hi = max(float(np.linalg.norm(f["displacement"], axis=1).max()) for _, f in steps)
         clim, label = (0.0, hi if hi > 0 else 1.0), "|u| [m]"
-    frames, camera = [], None
+
+    def values(f) -> np.ndarray:
+        return f["contact_pressure"] if has_p else np.linalg.norm(f["displacement"], axis=1)
+
+    size = (720, 504)
+    plotter = pv.Plotter(off_screen=True, window_size=size)
+    t0, f0 = steps[0]
+    surf = _surface(points + f0["displacement"], cells)
+    surf.point_data["value"] = values(f0)
+    actor = plotter.add_mesh(
+        surf,
+        scalars="value",
+        cmap=CMAP,
+        clim=clim,
+        smooth_shading=True,
+        show_scalar_bar=False,
+    )
+    surf = actor.mapper.dataset  # the mesh drawn (add_mesh may copy it)
+    bodies = []
+    for m in bodies_at(t0) if bodies_at is not None else []:
+        a = plotter.add_mesh(m, color="#d9b38c", opacity=1.0, smooth_shading=True)
+        bodies.append(a.mapper.dataset)
+    _camera(plotter, view)
+    plotter.reset_camera()
+    bar = _colour_bar_panel(
+        height=size[1], clim=clim, label=label, extend="max" if has_p else "neither"
+    )
+    frames = []
     for t, f in steps:
-        plotter = pv.Plotter(off_screen=True, window_size=(800, 560))
-        u = f["displacement"]
-        scalars = f["contact_pressure"] if has_p else np.linalg.norm(u, axis=1)
-        _render(
-            plotter,
-            points + u,
-            cells,
-            scalars=scalars,
-            clim=clim,
-            extra_meshes=bodies_at(t) if bodies_at is not None else (),
-        )
-        if camera is None:
-            _camera(plotter, view)
-            plotter.reset_camera()
-            camera = plotter.camera.copy()
-        else:
-            plotter.camera = camera.copy()
+        surf.points = points + f["displacement"]
+        surf.point_data["value"] = values(f)
+        if bodies_at is not None:
+            for m, new in zip(bodies, bodies_at(t), strict=True):
+                m.points = new.points
+        surf.compute_normals(inplace=True)  # smooth shading of the moved surface
+        plotter.add_text(f"{title}  t = {t:.4g}", font_size=10, name="title", render=False)
+        plotter.render()
         image = plotter.screenshot(return_img=True)
-        plotter.close()
-        fig = _with_colour_bar(
-            image,
-            clim=clim,
-            label=label,
-            title=f"{title}  t = {t:.4g}",
-            extend="max" if has_p else "neither",
-        )
-        frames.append(Image.fromarray(_figure_array(fig)))
-        plt.close(fig)
+        frames.append(Image.fromarray(np.hstack([image[:, :, :3], bar[: image.shape[0]]])))
+    plotter.close()
     gif = Path(gif)
     frames[0].save(
         gif, save_all=True, append_images=frames[1:], duration=frame_ms, loop=0, optimize=False
