@@ -551,14 +551,20 @@ class Progress:
                 from rich.progress import Progress as _Bar
             except ImportError:
                 return
+            from rich.table import Column
+
             self._bar = _Bar(
-                TextColumn("{task.description}"),
-                BarColumn(),
+                TextColumn("{task.description}", table_column=Column(no_wrap=True)),
+                BarColumn(bar_width=24),
                 TaskProgressColumn(),
                 TimeElapsedColumn(),
                 TextColumn("ETA"),
                 TimeRemainingColumn(),
-                TextColumn("{task.fields[info]}"),
+                TextColumn(
+                    "{task.fields[info]}",
+                    table_column=Column(no_wrap=True, overflow="ellipsis", ratio=1),
+                ),
+                expand=True,
             )
             self._task = self._bar.add_task(label, total=1.0, completed=start, info="")
             self._bar.start()
