@@ -232,7 +232,8 @@ class CandidateList:
         A pair's distance changes by at most the largest relative displacement (since the
         build) of a node of one side and a node of the other. Nodes in the same or adjacent
         tiles (edge ``R``) stay within ``skin`` of each other's displacement when each
-        node's displacement from its tile's mean plus the difference of the tile means do;
+        node's displacement from its tile's first node plus the difference of the first
+        nodes' displacements do;
         nodes farther apart were at least ``R - L`` from each other's pairs (``L`` the longest
         edge) and stay apart while no node moved more than ``(R - L - distance) / 2``. Rigid
         motion of a region costs nothing but the rotation across a few tiles."""
@@ -253,16 +254,17 @@ class Tiles(NamedTuple):
 
     def spread(self, D: FloatArray) -> float:
         """The relative-displacement bound of nodes in touching tiles for displacements
-        ``D`` (N, 3) [m], inf when a node moved more than ``far``."""
+        ``D`` (N, 3) [m] (each node against its tile's first node, plus the difference of
+        the first nodes of the two tiles), inf when a node moved more than ``far``."""
         if float(np.max(np.einsum("ij,ij->i", D, D), initial=0.0)) > self.far**2:
             return np.inf
-        cnt = np.bincount(self.tile)
-        mean = np.stack([np.bincount(self.tile, D[:, k]) for k in range(3)], 1) / cnt[:, None]
-        r = np.linalg.norm(D - mean[self.tile], axis=1)
+        ref = D[self.order[self.starts]]  # the first node of each tile
+        r = D - ref[self.tile]
+        r = np.sqrt(np.einsum("ij,ij->i", r, r))
         rmax = np.maximum.reduceat(r[self.order], self.starts)
         a, b = self.pairs[:, 0], self.pairs[:, 1]
-        dm = np.linalg.norm(mean[a] - mean[b], axis=1)
-        return float(np.max(rmax[a] + dm + rmax[b], initial=0.0))
+        dm = ref[a] - ref[b]
+        return float(np.max(rmax[a] + np.sqrt(np.einsum("ij,ij->i", dm, dm)) + rmax[b]))
 
 
 def _tiles(x: FloatArray, *, longest: float, distance: float) -> Tiles:
@@ -374,7 +376,8 @@ def pair_contacts(
     side = np.sign(_dot(x0[node] - q0, _unit_normals(x0, t)))
     side = np.where(side == 0, np.sign(_dot(r, nf)), side)
     side = np.where(side == 0, 1.0, side)
-    face = np.all(w > _FACE_EPS, axis=1) | (dist <= 1e-12 * max(1.0, float(np.abs(x).max())))
+    scale = max(1.0, float(np.max(np.abs(q), initial=0.0)))
+    face = np.all(w > _FACE_EPS, axis=1) | (dist <= 1e-12 * scale)
     with np.errstate(invalid="ignore", divide="ignore"):
         n = np.where(face[:, None], side[:, None] * nf, r / dist[:, None])
     gap = np.where(face, _dot(r, n), dist)
@@ -394,7 +397,7 @@ def edge_contacts(
     s, t, dist = segment_closest(*(x[idx[:, k]] for k in range(4)))
     coef = np.column_stack([1 - s, s, t - 1, -t])
     r, r0 = _relative(x, idx, coef), _relative(x0, idx, coef)
-    tiny = dist <= 1e-12 * max(1.0, float(np.abs(x).max()))
+    tiny = dist <= 1e-12 * max(1.0, float(np.max(np.abs(r0), initial=0.0)))
     with np.errstate(invalid="ignore", divide="ignore"):
         n = np.where(tiny[:, None], r0 / np.linalg.norm(r0, axis=1)[:, None], r / dist[:, None])
     side = np.where(_dot(r0, n) < 0, -1.0, 1.0)
@@ -956,12 +959,19 @@ def self_contact_step(
     )  # fmt: skip
 
 
+_NO_PAIRS = PairContacts(
+    np.zeros((0, 4), np.intp), np.zeros((0, 4)), np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.intp)
+)
+
+
 def _contacts_now(x0, xs, surface, cands: CandidateList, d, tol, edges: bool) -> PairContacts:
     """Node-triangle and edge pairs closer than ``d + tol`` at ``xs`` (per node / first
     edge the closest on each side), after the list's bound: build distance less the pair's
     relative motion since the build."""
     D = xs - cands.x_build
     sel = np.flatnonzero(cands.pt_dist - _relative_motion(D, cands.pt_nodes, 1) < d)
+    if sel.size == 0 and (not edges or len(cands.ee) == 0):
+        return _NO_PAIRS
     c = pair_contacts(x0, xs, surface, cands.pt_node[sel], cands.pt_tri[sel])
     c = PairContacts(*(a[c.gap < d + tol] for a in c))
     c = _closest_per_key(c, c.idx[:, 0])
@@ -1072,6 +1082,12 @@ class SelfContact:
         self.history: list[SelfContactRecord] = []
         self.wall, self.time = 0.0, 0.0
         self._window = self._empty_window()
+
+    def positions(self) -> FloatArray:
+        """Current positions (N, 3) [m] of all nodes in global numbering, on every rank
+        (collective; e.g. for :func:`clothfem.contact.intersections.check_surface` with
+        ``self.surface.triangles``)."""
+        return self.X + self._gather(self.model.u.x.array[: 3 * self.n])
 
     def _gather(self, a: FloatArray) -> FloatArray:
         out = np.empty(int(self._counts.sum()))
