@@ -213,7 +213,7 @@ def _same_history(a: list[dict[str, str]], b: list[dict[str, str]]) -> None:
 
 @pytest.mark.parametrize(
     ("sets", "picks"),
-    [(EXPLICIT, (5, 17)), (NEWMARK, (4, 16))],
+    [(EXPLICIT, (5, 17)), ([*NEWMARK, "body.1.angle_max=1.5"], (4, 11))],
     ids=["explicit", "newmark"],
 )
 def test_resume_bit_for_bit_from_two_checkpoints(tmp_path, sets, picks):
