@@ -124,11 +124,10 @@ def _output_problem(out: Path, *, overwrite: bool, resume: bool) -> str | None:
     if not out.exists():
         return None
     ours, others = _split_folder(out)
-    if others and (overwrite or not ours):
-        what = "--overwrite refused: it" if overwrite else "it is not empty and"
+    if others and ours and overwrite:
         return (
-            f"{where}: {what} holds files clothfem does not write ({_names(others)}); "
-            "choose a new or empty folder"
+            f"{where}: --overwrite refused: it holds files clothfem does not write "
+            f"({_names(others)}); remove the old run yourself or choose another --out"
         )
     if ours and not overwrite:
         extra = f" and other files ({_names(others)})" if others else ""
@@ -143,10 +142,11 @@ def check_output(
     out: str | Path, *, overwrite: bool = False, resume: bool = False, comm: MPI.Comm
 ) -> None:
     """Raise :class:`SceneError` (one line naming the folder) unless a run may write to
-    ``out``: it is new or empty; or it holds only a previous run's files and ``overwrite``
-    (:func:`clear_output` removes them once the run has started); or ``resume`` and it holds
-    an interrupted run's checkpoint. A folder with files clothfem does not write is refused
-    in every case. Collective; writes nothing."""
+    ``out``: it holds no other run's files (it may hold files clothfem does not write); or
+    it holds a previous run's files only and ``overwrite`` (:func:`clear_output` removes them
+    once the model is built; with other files there, ``overwrite`` is refused: they are never
+    deleted); or ``resume`` and it holds an interrupted run's checkpoint. Collective; writes
+    nothing."""
     msg = None
     if comm.rank == 0:
         msg = _output_problem(Path(out), overwrite=overwrite, resume=resume)

@@ -75,9 +75,10 @@ def _series(out: Path) -> tuple[list[float], list[dict[str, np.ndarray]]]:
 
 
 def test_output_folder_rules(tmp_path):
-    """New or empty: fine. A previous run: refused, or with overwrite its files are removed
-    (and only those). Files clothfem does not write: refused, also with overwrite. A folder
-    under a file: refused. Every refusal is one line naming the folder."""
+    """New, empty or holding only files clothfem does not write: fine. A previous run:
+    refused, or with overwrite its files are removed; with other files beside it, overwrite
+    is refused (they are never deleted). A folder under a file: refused. Every refusal is one
+    line naming the folder."""
     base = _shared(tmp_path)
     check_output(base / "new", comm=COMM)
     if COMM.rank == 0:
@@ -95,12 +96,12 @@ def test_output_folder_rules(tmp_path):
         (base / "afile").write_text("x")
     COMM.barrier()
     check_output(base / "empty", comm=COMM)
+    check_output(base / "user", comm=COMM)
+    check_output(base / "user", overwrite=True, comm=COMM)  # nothing of a run to remove
     for folder, kwargs, words in [
         ("run", {}, "holds another run"),
         ("mixed", {}, "holds another run"),
-        ("mixed", {"overwrite": True}, "notes.txt"),
-        ("user", {}, "data.csv"),
-        ("user", {"overwrite": True}, "--overwrite refused"),
+        ("mixed", {"overwrite": True}, "--overwrite refused"),
         ("afile/out", {}, "cannot be created"),
         ("empty", {"resume": True}, "--resume needs"),
     ]:
