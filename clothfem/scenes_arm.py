@@ -398,10 +398,16 @@ def _torque_plot(csv_path: Path, png: Path, title: str) -> None:
     if not rows:
         return
     a = [float(r["angle_deg"]) for r in rows]
+    hinged = max(a) > min(a)  # else (no hinge: a recorded motion) against time
+    x = a if hinged else [float(r["time"]) for r in rows]
     fig, ax = plt.subplots(figsize=(6, 4))
-    ax.plot(a, [float(r["torque_mag"]) for r in rows], "o-", label="|tau| (Eq. 28)")
-    ax.plot(a, [-float(r["torque_flex"]) for r in rows], "s--", label="-tau . hinge axis")
-    ax.set_xlabel("flexion angle [deg]")
+    ax.plot(
+        x, [float(r["torque_mag"]) for r in rows], "o-", color="C0", ms=4, label="|tau| (Eq. 28)"
+    )
+    if hinged:
+        tf = [-float(r["torque_flex"]) for r in rows]
+        ax.plot(x, tf, "s--", color="C1", ms=4, mfc="none", label="-tau . hinge axis")
+    ax.set_xlabel("flexion angle [deg]" if hinged else "time [s]")
     ax.set_ylabel("torque about the joint [N m]")
     ax.set_title(title)
     ax.grid(True)
@@ -1228,8 +1234,13 @@ def _run_explicit(
             frac = min(max(r.time / t_end, 0.0), 1.0) if t_end > 0 else 1.0
             progress.update(
                 frac,
-                f"t {r.time:7.4f} s  angle {angle:6.2f} deg  |tau| {row['torque_mag']:.4f} N m"
-                f"  row {state['row']}  steps {r.step}  active {h.active}",
+                (
+                    f"t {r.time:7.4f} s  angle {angle:6.2f} deg  |tau| {row['torque_mag']:.4f} N m"
+                    f"  active {h.active}"
+                    if fc is not None
+                    else f"t {r.time:7.4f} s  kinetic energy {r.kinetic:.3e} J"
+                )
+                + f"  row {state['row']}  steps {r.step}",
             )
             _progress_snapshots(
                 plan, state, row["stage"], angle, lambda tag: snapshot(tag, r.time), t=r.time
