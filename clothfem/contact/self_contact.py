@@ -297,6 +297,10 @@ def _moved(x: FloatArray, x_ref: FloatArray) -> FloatArray:
 def _relative_motion(D: FloatArray, g: IntArray, split: int) -> FloatArray:
     """Largest ``|D_i - D_k|`` (M,) [m] over the nodes ``i`` of one side (the first ``split``
     columns of ``g``) and ``k`` of the other: a bound on the change of the pair's distance."""
+    if len(g) and _numba_kernels():
+        out = np.empty(len(g))
+        _numba_kernels()[3](np.ascontiguousarray(D), g.astype(np.int64), split, out)
+        return out
     Dg = D[g]
     diff = Dg[:, :split, None, :] - Dg[:, None, split:, :]
     return np.sqrt(np.max(np.einsum("mabk,mabk->mab", diff, diff), axis=(1, 2), initial=0.0))
@@ -361,13 +365,26 @@ class PairContacts(NamedTuple):
 
 
 def pair_contacts(
-    x0: FloatArray, x: FloatArray, surface: FabricSurface, node: IntArray, tri: IntArray
+    x0: FloatArray,
+    x: FloatArray,
+    surface: FabricSurface,
+    node: IntArray,
+    tri: IntArray,
+    *,
+    kernel: str = "numpy",
 ) -> PairContacts:
     """Gaps and normals of node-triangle pairs at ``x``. Closest point inside the face: the
     triangle normal, signed by the side the node was on at the step's start ``x0`` (so a
     node that passed through the face gets ``gap < 0``); on an edge or vertex: the direction
-    from the closest point to the node."""
+    from the closest point to the node. ``kernel``: "numpy", or "numba"/"auto" for the
+    compiled loop (the same operations pair by pair)."""
     t = surface.triangles[tri]
+    idx = np.column_stack([node, t])
+    scale = max(1.0, float(np.max(np.abs(x[node]), initial=0.0)))
+    if len(node) and _use_numba(kernel):
+        coef, n, gap = np.empty((len(node), 4)), np.empty((len(node), 3)), np.empty(len(node))
+        _numba_kernels()[2](x0, x, idx.astype(np.int64), scale, _FACE_EPS, coef, n, gap)
+        return PairContacts(idx, coef, n, gap, tri)
     q, w = closest_point_triangle(x[node], x[t[:, 0]], x[t[:, 1]], x[t[:, 2]])
     r = x[node] - q
     dist = np.linalg.norm(r, axis=1)
@@ -376,12 +393,10 @@ def pair_contacts(
     side = np.sign(_dot(x0[node] - q0, _unit_normals(x0, t)))
     side = np.where(side == 0, np.sign(_dot(r, nf)), side)
     side = np.where(side == 0, 1.0, side)
-    scale = max(1.0, float(np.max(np.abs(q), initial=0.0)))
     face = np.all(w > _FACE_EPS, axis=1) | (dist <= 1e-12 * scale)
     with np.errstate(invalid="ignore", divide="ignore"):
         n = np.where(face[:, None], side[:, None] * nf, r / dist[:, None])
     gap = np.where(face, _dot(r, n), dist)
-    idx = np.column_stack([node, t])
     coef = np.column_stack([np.ones(len(node)), -w])
     return PairContacts(idx, coef, n, gap, tri)
 
@@ -548,6 +563,81 @@ def _gs_friction(idx, coef, normal, inv_m, y, lim, passes, tol, Jt):  # pragma: 
     return passes
 
 
+def _pairs_kernel(x0, x, idx, scale, face_eps, coef, normal, gap):  # pragma: no cover
+    """:func:`pair_contacts` pair by pair (numba): coefficients, normals and gaps."""
+    for c in range(idx.shape[0]):
+        p, a, b, cc = idx[c, 0], idx[c, 1], idx[c, 2], idx[c, 3]
+        ab, ac, ap, bp, cp = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+        for j in range(3):
+            ab[j] = x[b, j] - x[a, j]
+            ac[j] = x[cc, j] - x[a, j]
+            ap[j] = x[p, j] - x[a, j]
+            bp[j] = x[p, j] - x[b, j]
+            cp[j] = x[p, j] - x[cc, j]
+        d1, d2 = ab @ ap, ac @ ap
+        d3, d4, d5, d6 = ab @ bp, ac @ bp, ab @ cp, ac @ cp
+        va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+        if d1 <= 0 and d2 <= 0:
+            w0, w1, w2 = 1.0, 0.0, 0.0
+        elif d3 >= 0 and d4 <= d3:
+            w0, w1, w2 = 0.0, 1.0, 0.0
+        elif vc <= 0 and d1 >= 0 and d3 <= 0:
+            v = d1 / (d1 - d3)
+            w0, w1, w2 = 1 - v, v, 0.0
+        elif d6 >= 0 and d5 <= d6:
+            w0, w1, w2 = 0.0, 0.0, 1.0
+        elif vb <= 0 and d2 >= 0 and d6 <= 0:
+            w = d2 / (d2 - d6)
+            w0, w1, w2 = 1 - w, 0.0, w
+        elif va <= 0 and d4 - d3 >= 0 and d5 - d6 >= 0:
+            w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+            w0, w1, w2 = 0.0, 1 - w, w
+        else:
+            den = va + vb + vc
+            w1, w2 = vb / den, vc / den
+            w0 = 1.0 - w1 - w2
+        r, r0 = np.empty(3), np.empty(3)
+        for j in range(3):
+            r[j] = x[p, j] - (w0 * x[a, j] + w1 * x[b, j] + w2 * x[cc, j])
+            r0[j] = x0[p, j] - (w0 * x0[a, j] + w1 * x0[b, j] + w2 * x0[cc, j])
+        dist = np.sqrt(r @ r)
+        nf = np.cross(ab, ac)
+        ln = np.sqrt(nf @ nf)
+        nf = nf / ln if ln > 0 else nf * 0.0
+        e1 = np.empty(3)
+        e2 = np.empty(3)
+        for j in range(3):
+            e1[j] = x0[b, j] - x0[a, j]
+            e2[j] = x0[cc, j] - x0[a, j]
+        n0 = np.cross(e1, e2)
+        l0 = np.sqrt(n0 @ n0)
+        n0 = n0 / l0 if l0 > 0 else n0 * 0.0
+        side = np.sign(r0 @ n0)
+        if side == 0:
+            side = np.sign(r @ nf)
+        if side == 0:
+            side = 1.0
+        face = (w0 > face_eps and w1 > face_eps and w2 > face_eps) or dist <= 1e-12 * scale
+        for j in range(3):
+            normal[c, j] = side * nf[j] if face else r[j] / dist
+        gap[c] = r @ normal[c] if face else dist
+        coef[c, 0], coef[c, 1], coef[c, 2], coef[c, 3] = 1.0, -w0, -w1, -w2
+
+
+def _motion_kernel(D, g, split, out):  # pragma: no cover
+    """:func:`_relative_motion` pair by pair (numba)."""
+    for c in range(g.shape[0]):
+        best = 0.0
+        for i in range(split):
+            for k in range(split, 4):
+                s = 0.0
+                for j in range(3):
+                    dd = D[g[c, i], j] - D[g[c, k], j]
+                    s += dd * dd
+                best = max(best, s)
+        out[c] = np.sqrt(best)
+
+
 _KERNELS: tuple = ()
 _TRIED = False
 
@@ -562,7 +652,10 @@ def _numba_kernels() -> tuple:
             from numba import njit
         except ImportError:  # pragma: no cover
             return _KERNELS
-        _KERNELS = (njit(cache=True)(_gs_normal), njit(cache=True)(_gs_friction))
+        _KERNELS = tuple(
+            njit(cache=True, error_model="numpy")(f)
+            for f in (_gs_normal, _gs_friction, _pairs_kernel, _motion_kernel)
+        )
     return _KERNELS
 
 
@@ -938,7 +1031,7 @@ def self_contact_step(
     inv_m = np.where(fx, 0.0, 1.0 / m)
     d, tol = p.distance, p.tolerance * p.distance
     cands, rebuilt = _list_for(candidates, xs, x0, surface, p)
-    c = _contacts_now(x0, xs, surface, cands, d, tol, p.edge_proximity)
+    c = _contacts_now(x0, xs, surface, cands, d, tol, p.edge_proximity, p.kernel)
     x, v = xs.copy(), vs.copy()
     lam, jn = np.zeros(len(c.gap)), np.zeros(len(c.gap))
     jt, stick = np.zeros((len(jn), 3)), np.ones(len(jn), dtype=bool)
@@ -964,7 +1057,7 @@ _NO_PAIRS = PairContacts(
 )
 
 
-def _contacts_now(x0, xs, surface, cands: CandidateList, d, tol, edges: bool) -> PairContacts:
+def _contacts_now(x0, xs, surface, cands: CandidateList, d, tol, edges, kernel) -> PairContacts:
     """Node-triangle and edge pairs closer than ``d + tol`` at ``xs`` (per node / first
     edge the closest on each side), after the list's bound: build distance less the pair's
     relative motion since the build."""
@@ -972,7 +1065,7 @@ def _contacts_now(x0, xs, surface, cands: CandidateList, d, tol, edges: bool) ->
     sel = np.flatnonzero(cands.pt_dist - _relative_motion(D, cands.pt_nodes, 1) < d)
     if sel.size == 0 and (not edges or len(cands.ee) == 0):
         return _NO_PAIRS
-    c = pair_contacts(x0, xs, surface, cands.pt_node[sel], cands.pt_tri[sel])
+    c = pair_contacts(x0, xs, surface, cands.pt_node[sel], cands.pt_tri[sel], kernel=kernel)
     c = PairContacts(*(a[c.gap < d + tol] for a in c))
     c = _closest_per_key(c, c.idx[:, 0])
     if not edges:

@@ -230,3 +230,27 @@ def test_candidate_list_survives_rigid_motion_and_stays_complete():
         found = zip(fresh.pt_node[close].tolist(), fresh.pt_tri[close].tolist(), strict=True)
         assert close.any() and set(found) <= listed
     assert checked >= 5
+
+
+def test_compiled_narrow_phase_matches_numpy():
+    """The numba loop of pair_contacts gives the numpy reference's gaps, normals and
+    weights to round-off on random node-triangle pairs (face, edge and vertex regions,
+    nodes on either side at the step's start)."""
+    if not sc._numba_kernels():
+        pytest.skip("numba not importable")
+    rng = np.random.default_rng(3)
+    x0 = rng.normal(size=(400, 3))
+    x = x0 + 0.05 * rng.normal(size=x0.shape)
+    surf = sc.FabricSurface(
+        100 + np.arange(300).reshape(100, 3), np.zeros(100, int), np.zeros((0, 2), int),
+        400, np.zeros(0, np.int64), 1,
+    )  # fmt: skip
+    node, tri = np.arange(100).repeat(3), rng.integers(0, 100, size=300)
+    a = sc.pair_contacts(x0, x, surf, node, tri, kernel="numpy")
+    b = sc.pair_contacts(x0, x, surf, node, tri, kernel="numba")
+    for u, w in zip(a[1:4], b[1:4], strict=True):
+        np.testing.assert_allclose(u, w, atol=1e-12)
+    D = rng.normal(size=(400, 3))
+    g = np.column_stack([node, surf.triangles[tri]])
+    exact = np.max([np.linalg.norm(D[g[:, 0]] - D[g[:, k]], axis=1) for k in (1, 2, 3)], axis=0)
+    np.testing.assert_allclose(sc._relative_motion(D, g, 1), exact, rtol=1e-14)
