@@ -645,6 +645,21 @@ def _animation(scene: dict[str, Any], out: Path, bodies_at: Callable[[float], li
     )
 
 
+def _stop_with_fields(
+    check_stop: Callable[[str], None], where: str, writer: ResultWriter, t: float, fields
+) -> None:
+    """``check_stop(where)``; when it stops the run, the fields at ``t`` (``fields()``: the
+    functions to write besides the displacement) are written first unless they were."""
+    from .run import RunStopped
+
+    try:
+        check_stop(where)
+    except RunStopped:
+        if writer.last_time < t:  # the same on every rank
+            writer.write_fields(t, fields())
+        raise
+
+
 def _end_together(comm: MPI.Comm) -> None:
     """The runners' ``finally``: wait for every rank before the closing writes, unless this
     rank is leaving with an error the other ranks do not share. The solver stops and the
@@ -859,6 +874,10 @@ def _run_dynamic(
         update_pressure()
         _snapshot(scene, model, out, comm, tag, contact.bodies, pressure=pressure)
 
+    def fields_now() -> tuple[fem.Function]:
+        update_pressure()
+        return (pressure,)
+
     state = {"step": 0, "rows": 0, "cut": 0, "pen": 0.0, "newton": 0, "snap": 0}
     # the measured joint's work [J], hinge angle [rad] and segment torque about the hinge
     # axis [N m] at the last step
@@ -964,7 +983,13 @@ def _run_dynamic(
                 f"newton {cr.newton_iterations}",
             )
             _progress_snapshots(plan, state, row["stage"], angle, snapshot, t=r.time)
-            check_stop(f"step {step} (t = {r.time:.6g} s)")
+            _stop_with_fields(
+                check_stop,
+                f"step {step} (t = {r.time:.6g} s)",
+                writer,
+                r.time,
+                fields_now,
+            )
 
         try:
             dc.run(
@@ -1245,7 +1270,8 @@ def _run_explicit(
             _progress_snapshots(
                 plan, state, row["stage"], angle, lambda tag: snapshot(tag, r.time), t=r.time
             )
-            check_stop(f"row {state['row']} (t = {r.time:.6g} s)")
+            where = f"row {state['row']} (t = {r.time:.6g} s)"
+            _stop_with_fields(check_stop, where, writer, r.time, lambda: fields)
 
         try:
             integrate_explicit(

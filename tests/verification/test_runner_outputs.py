@@ -325,6 +325,31 @@ def test_sigkill_leaves_readable_files_and_resume_continues(tmp_path):
 
 @pytest.mark.serial
 @pytest.mark.skipif(COMM.size > 1, reason="launches its own process")
+def test_sigterm_writes_the_state_it_stops_at(tmp_path):
+    """Fields every 100 rows, stopped by SIGTERM after a few rows: exit 130 and the field
+    series holds the state of the last history row."""
+    out = tmp_path / "stopped"
+    sets = [*EXPLICIT[:-1], "output.every=100", "output.checkpoint_every=0"]
+    args = [a for s in sets for a in ("--set", s)]
+    proc = subprocess.Popen(
+        _cli(out, CI, *args), env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+    )
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and proc.poll() is None:
+        path = out / "history.csv"
+        if path.exists() and path.read_text().count("\n") >= 4:
+            proc.send_signal(signal.SIGTERM)
+            break
+        time.sleep(0.02)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err.decode()[-2000:]
+    times, fields = _series(out)
+    assert times == [float(_rows(out)[-1]["time"])]
+    assert "contact_pressure" in fields[0]
+
+
+@pytest.mark.serial
+@pytest.mark.skipif(COMM.size > 1, reason="launches its own process")
 def test_pictures_animation_and_progress(tmp_path):
     """A run with pictures off a terminal: plain progress lines with an ETA, no VTK X-server
     warning; snapshots (coloured by contact pressure, with a colour bar) and animation.gif
