@@ -216,3 +216,41 @@ def test_shell_strip_closing_like_a_book():
     assert max(len(contact.last.jn), 1) > 1  # the halves are in contact at the end
     _, free = run(False)
     assert len(intersecting_pairs(free[-1], tri)) > 0
+
+
+def test_film_then_self_contact_in_one_step():
+    """The runner's chain: a sphere rises into a free patch (FILM) with
+    SelfContact wrapping the FilmContact; FILM still keeps every node out of the body (gap
+    >= -1e-12 as without self-contact) and the fabric never intersects itself."""
+    from clothfem import dynamics as dy
+    from clothfem.contact import closest_point_union
+    from clothfem.contact.film import FilmContact
+    from clothfem.contact.self_contact import SelfContact
+    from clothfem.shell import FabricMaterial, ShellModel
+
+    c0, radius, vz = np.array([0.05, 0.0, -0.035]), 0.03, 0.5
+
+    def bodies_at(t):
+        centre = c0 + [0.0, 0.0, vz * t]
+        return [(centre, np.eye(3), np.full(3, radius))], [(np.array([0, 0, vz]), np.zeros(3))]
+
+    sm = meshes.strip(MPI.COMM_WORLD, length=0.1, width=0.1, nx=4, ny=4)
+    mat = FabricMaterial(E1=1e5, E2=1e5, G12=2e4, rho=500.0)
+    model = ShellModel(sm, material=mat, thickness=1e-3)
+    system = dy.ShellSystem(model, rotary_scale=100.0)
+    fc = FilmContact(system, bodies_at)
+    sc = SelfContact(system, params=SelfContactParameters(distance=D, mu=0.3), film=fc)
+    worst = []
+
+    def on_step(r):
+        fc.collect()
+        x = sc.positions()
+        worst.append(check_surface(x, sc.surface.triangles, radius=4 * D).intersections)
+
+    recs, _ = dy.integrate_explicit(system, t_end=0.03, contact=sc, on_step=on_step)
+    assert max(h.active for h in fc.history) > 0 and max(worst) == 0
+    n = model.n_owned
+    x = model.x_nodes[:n] + model.u.x.array[: 3 * n].reshape(n, 3)
+    gap = closest_point_union(x, bodies_at(recs[-1].time)[0]).gap
+    assert MPI.COMM_WORLD.allreduce(float(gap.min(initial=np.inf)), op=MPI.MIN) > -1e-12
+    assert sc.collect().steps == len(recs)
