@@ -716,6 +716,12 @@ def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
                     _fail(f"body[{i}].{k}", "is a key of type = 'mocap' segments only")
             continue
         key = f"body[{i}]"
+        if out["solver"]["integrator"] == "static":
+            _fail(
+                f"{key}.type",
+                "'mocap' needs solver.integrator = 'explicit' or 'newmark' (the quasi-static "
+                "path drives hinges only)",
+            )
         for k in ("joint", "hinge_axis", "angle_max"):
             if seg[k] is not None:
                 _fail(f"{key}.{k}", "is a key of type = 'hinge' segments only")

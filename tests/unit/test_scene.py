@@ -182,6 +182,7 @@ MOCAP = ROOT / "demos" / "scenes" / "sleeve_mocap.toml"
         ("body.1.placed_by='torso'", "body[1].placed_by", "must name a mocap segment"),
         ("body.0.hinge_axis=[0,1,0]", "body[0].hinge_axis", "type = 'hinge' segments only"),
         ("body.0.max_gap=-1", "body[0].max_gap", "must be an integer in [0, inf]"),
+        ("solver.integrator='static'", "body[0].type", "'mocap' needs solver.integrator"),
     ],
 )
 def test_mocap_segments_checked_at_load(override, key, words, capsys):
