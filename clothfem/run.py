@@ -85,13 +85,12 @@ def _split_folder(out: Path) -> tuple[list[str], list[str]]:
     """(entries a run writes, other entries) directly in ``out``."""
     ours, others = [], []
     for p in sorted(out.iterdir()):
-        if p.is_dir() and p.name == "checkpoint":
-            inner = [q.name for q in p.iterdir()]
+        if p.is_dir() and p.name == "checkpoint":  # ours if it holds rank files only
             mine = all(
                 q.is_file() and any(fnmatch.fnmatch(q.name, pat) for pat in CHECKPOINT_FILES)
                 for q in p.iterdir()
             )
-            (ours if mine else others).append(p.name + "/" if mine or not inner else p.name)
+            (ours if mine else others).append("checkpoint/")
         elif p.is_file() and any(fnmatch.fnmatch(p.name, pat) for pat in RUN_FILES):
             ours.append(p.name)
         else:
