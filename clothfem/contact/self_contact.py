@@ -200,6 +200,27 @@ def segment_distance(p1: FloatArray, p2: FloatArray, q1: FloatArray, q2: FloatAr
     return segment_closest(p1, p2, q1, q2)[2]
 
 
+def _pt_distances(x: FloatArray, idx: IntArray) -> FloatArray:
+    """Distances (M,) [m] of node ``idx[:, 0]`` to triangle ``idx[:, 1:]`` (numba loop when
+    numba imports, else :func:`closest_point_triangle`)."""
+    if len(idx) and _numba_kernels():
+        out = np.empty(len(idx))
+        _numba_kernels()[4](x, idx.astype(np.int64), out)
+        return out
+    q, _ = closest_point_triangle(*(x[idx[:, k]] for k in range(4)))
+    return np.linalg.norm(x[idx[:, 0]] - q, axis=1)
+
+
+def _ee_distances(x: FloatArray, idx: IntArray) -> FloatArray:
+    """Distances (M,) [m] of segments ``idx[:, :2]`` and ``idx[:, 2:]`` (numba loop when
+    numba imports, else :func:`segment_distance`)."""
+    if len(idx) and _numba_kernels():
+        out = np.empty(len(idx))
+        _numba_kernels()[5](x, idx.astype(np.int64), out)
+        return out
+    return segment_distance(*(x[idx[:, k]] for k in range(4)))
+
+
 def _unit_normals(x: FloatArray, tri: IntArray) -> FloatArray:
     n = np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]])
     ln = np.linalg.norm(n, axis=1, keepdims=True)
@@ -331,8 +352,7 @@ def build_candidates(
     rad = float(np.max(np.linalg.norm(xt - cen[:, None], axis=2), initial=0.0))
     hits = cKDTree(x).sparse_distance_matrix(cKDTree(cen), reach + rad, output_type="ndarray")
     node, t = hits["i"].astype(np.intp), hits["j"].astype(np.intp)
-    q, _ = closest_point_triangle(x[node], *(x[tri[t, k]] for k in range(3)))
-    dist = np.linalg.norm(x[node] - q, axis=1)
+    dist = _pt_distances(x, np.column_stack([node, tri[t]]))
     keep = np.flatnonzero(dist < reach)
     keep = keep[_far(surface, node[keep, None], tri[t[keep]])]
     xe = x[edge]
@@ -340,7 +360,7 @@ def build_candidates(
     length = float(np.max(np.linalg.norm(xe[:, 0] - xe[:, 1], axis=1), initial=0.0))
     ee = cKDTree(mid).query_pairs(e_reach + length, output_type="ndarray").astype(np.intp)
     e0, e1 = edge[ee[:, 0]], edge[ee[:, 1]]
-    ed = segment_distance(x[e0[:, 0]], x[e0[:, 1]], x[e1[:, 0]], x[e1[:, 1]])
+    ed = _ee_distances(x, np.column_stack([e0, e1]))
     close = np.flatnonzero(ed < e_reach)
     close = close[_far(surface, e0[close], e1[close])]
     return CandidateList(
@@ -402,22 +422,29 @@ def pair_contacts(
 
 
 def edge_contacts(
-    x0: FloatArray, x: FloatArray, surface: FabricSurface, ee: IntArray
+    x0: FloatArray, x: FloatArray, surface: FabricSurface, ee: IntArray, *, kernel: str = "numpy"
 ) -> PairContacts:
     """Gaps and normals of edge pairs ``ee`` (M, 2) at ``x``: the normal points from the
     second edge's closest point to the first's, reversed (``gap < 0``) when the same points
-    were on the other side at the step's start ``x0``."""
+    were on the other side at the step's start ``x0``. ``kernel`` as for
+    :func:`pair_contacts`."""
     e0, e1 = surface.edges[ee[:, 0]], surface.edges[ee[:, 1]]
     idx = np.column_stack([e0, e1])
+    scale = max(1.0, float(np.max(np.abs(x0[idx.ravel()]), initial=0.0)))
+    tri = np.full(len(ee), -1, dtype=np.intp)
+    if len(ee) and _use_numba(kernel):
+        coef, n, gap = np.empty((len(ee), 4)), np.empty((len(ee), 3)), np.empty(len(ee))
+        _numba_kernels()[6](x0, x, idx.astype(np.int64), scale, coef, n, gap)
+        return PairContacts(idx, coef, n, gap, tri)
     s, t, dist = segment_closest(*(x[idx[:, k]] for k in range(4)))
     coef = np.column_stack([1 - s, s, t - 1, -t])
     r, r0 = _relative(x, idx, coef), _relative(x0, idx, coef)
-    tiny = dist <= 1e-12 * max(1.0, float(np.max(np.abs(r0), initial=0.0)))
+    tiny = dist <= 1e-12 * scale
     with np.errstate(invalid="ignore", divide="ignore"):
         n = np.where(tiny[:, None], r0 / np.linalg.norm(r0, axis=1)[:, None], r / dist[:, None])
     side = np.where(_dot(r0, n) < 0, -1.0, 1.0)
-    n = np.nan_to_num(side[:, None] * n)
-    return PairContacts(idx, coef, n, _dot(r, n), np.full(len(ee), -1, dtype=np.intp))
+    n = np.nan_to_num(side[:, None] * n, nan=0.0, posinf=0.0, neginf=0.0)
+    return PairContacts(idx, coef, n, _dot(r, n), tri)
 
 
 def _closest_per_key(c: PairContacts, key: IntArray) -> PairContacts:
@@ -563,39 +590,111 @@ def _gs_friction(idx, coef, normal, inv_m, y, lim, passes, tol, Jt):  # pragma: 
     return passes
 
 
+def _dot3(x, i, j, y, k, l):  # pragma: no cover
+    """``(x[i] - x[j]) . (y[k] - y[l])`` on rows of (N, 3) arrays (numba, no allocation)."""
+    return (
+        (x[i, 0] - x[j, 0]) * (y[k, 0] - y[l, 0])
+        + (x[i, 1] - x[j, 1]) * (y[k, 1] - y[l, 1])
+        + (x[i, 2] - x[j, 2]) * (y[k, 2] - y[l, 2])
+    )
+
+
+def _bary(x, p, a, b, cc):  # pragma: no cover
+    """Barycentric weights of the closest point of node ``p`` on triangle ``(a, b, cc)``
+    (Ericson's Voronoi regions, the order of :func:`closest_point_triangle`; numba)."""
+    d1, d2 = _dot3(x, b, a, x, p, a), _dot3(x, cc, a, x, p, a)
+    d3, d4 = _dot3(x, b, a, x, p, b), _dot3(x, cc, a, x, p, b)
+    d5, d6 = _dot3(x, b, a, x, p, cc), _dot3(x, cc, a, x, p, cc)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    if d1 <= 0 and d2 <= 0:
+        return 1.0, 0.0, 0.0
+    if d3 >= 0 and d4 <= d3:
+        return 0.0, 1.0, 0.0
+    if vc <= 0 and d1 >= 0 and d3 <= 0:
+        v = d1 / (d1 - d3)
+        return 1 - v, v, 0.0
+    if d6 >= 0 and d5 <= d6:
+        return 0.0, 0.0, 1.0
+    if vb <= 0 and d2 >= 0 and d6 <= 0:
+        w = d2 / (d2 - d6)
+        return 1 - w, 0.0, w
+    if va <= 0 and d4 - d3 >= 0 and d5 - d6 >= 0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return 0.0, 1 - w, w
+    den = va + vb + vc
+    w1, w2 = vb / den, vc / den
+    return 1.0 - w1 - w2, w1, w2
+
+
+def _seg_st(x, i1, i2, j1, j2):  # pragma: no cover
+    """Parameters of the closest points of segments ``i1 i2`` and ``j1 j2`` (the order of
+    :func:`segment_closest`; numba)."""
+    a, e, f = _dot3(x, i2, i1, x, i2, i1), _dot3(x, j2, j1, x, j2, j1), _dot3(x, j2, j1, x, i1, j1)
+    c, b = _dot3(x, i2, i1, x, i1, j1), _dot3(x, i2, i1, x, j2, j1)
+    den = a * e - b * b
+    s = min(max((b * f - c * e) / den, 0.0), 1.0) if den > 1e-300 else 0.0
+    t = (b * s + f) / e
+    if t < 0:
+        s = min(max(-c / a, 0.0), 1.0)
+    elif t > 1:
+        s = min(max((b - c) / a, 0.0), 1.0)
+    return s, min(max(t, 0.0), 1.0)
+
+
+def _pt_dist_kernel(x, idx, out):  # pragma: no cover
+    """Distances of node ``idx[:, 0]`` to triangle ``idx[:, 1:]`` (numba)."""
+    for c in range(idx.shape[0]):
+        p, a, b, cc = idx[c, 0], idx[c, 1], idx[c, 2], idx[c, 3]
+        w0, w1, w2 = _bary(x, p, a, b, cc)
+        s = 0.0
+        for j in range(3):
+            d = x[p, j] - (w0 * x[a, j] + w1 * x[b, j] + w2 * x[cc, j])
+            s += d * d
+        out[c] = np.sqrt(s)
+
+
+def _ee_dist_kernel(x, idx, out):  # pragma: no cover
+    """Distances of segments ``idx[:, :2]`` and ``idx[:, 2:]`` (numba)."""
+    for c in range(idx.shape[0]):
+        s, t = _seg_st(x, idx[c, 0], idx[c, 1], idx[c, 2], idx[c, 3])
+        q = 0.0
+        for j in range(3):
+            d = (1 - s) * x[idx[c, 0], j] + s * x[idx[c, 1], j]
+            d -= (1 - t) * x[idx[c, 2], j] + t * x[idx[c, 3], j]
+            q += d * d
+        out[c] = np.sqrt(q)
+
+
+def _ee_kernel(x0, x, idx, scale, coef, normal, gap):  # pragma: no cover
+    """:func:`edge_contacts` pair by pair (numba): coefficients, normals and gaps."""
+    r, r0 = np.zeros(3), np.zeros(3)
+    for c in range(idx.shape[0]):
+        s, t = _seg_st(x, idx[c, 0], idx[c, 1], idx[c, 2], idx[c, 3])
+        coef[c, 0], coef[c, 1], coef[c, 2], coef[c, 3] = 1 - s, s, t - 1, -t
+        r[:] = 0.0
+        r0[:] = 0.0
+        for k in range(4):
+            for j in range(3):
+                r[j] += coef[c, k] * x[idx[c, k], j]
+                r0[j] += coef[c, k] * x0[idx[c, k], j]
+        dist = np.sqrt(r @ r)
+        n = r0 / np.sqrt(r0 @ r0) if dist <= 1e-12 * scale else r / dist
+        side = -1.0 if r0 @ n < 0 else 1.0
+        for j in range(3):
+            v = side * n[j]
+            normal[c, j] = v if np.isfinite(v) else 0.0
+        gap[c] = r @ normal[c]
+
+
 def _pairs_kernel(x0, x, idx, scale, face_eps, coef, normal, gap):  # pragma: no cover
     """:func:`pair_contacts` pair by pair (numba): coefficients, normals and gaps."""
     for c in range(idx.shape[0]):
         p, a, b, cc = idx[c, 0], idx[c, 1], idx[c, 2], idx[c, 3]
-        ab, ac, ap, bp, cp = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+        w0, w1, w2 = _bary(x, p, a, b, cc)
+        ab, ac = np.empty(3), np.empty(3)
         for j in range(3):
             ab[j] = x[b, j] - x[a, j]
             ac[j] = x[cc, j] - x[a, j]
-            ap[j] = x[p, j] - x[a, j]
-            bp[j] = x[p, j] - x[b, j]
-            cp[j] = x[p, j] - x[cc, j]
-        d1, d2 = ab @ ap, ac @ ap
-        d3, d4, d5, d6 = ab @ bp, ac @ bp, ab @ cp, ac @ cp
-        va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-        if d1 <= 0 and d2 <= 0:
-            w0, w1, w2 = 1.0, 0.0, 0.0
-        elif d3 >= 0 and d4 <= d3:
-            w0, w1, w2 = 0.0, 1.0, 0.0
-        elif vc <= 0 and d1 >= 0 and d3 <= 0:
-            v = d1 / (d1 - d3)
-            w0, w1, w2 = 1 - v, v, 0.0
-        elif d6 >= 0 and d5 <= d6:
-            w0, w1, w2 = 0.0, 0.0, 1.0
-        elif vb <= 0 and d2 >= 0 and d6 <= 0:
-            w = d2 / (d2 - d6)
-            w0, w1, w2 = 1 - w, 0.0, w
-        elif va <= 0 and d4 - d3 >= 0 and d5 - d6 >= 0:
-            w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-            w0, w1, w2 = 0.0, 1 - w, w
-        else:
-            den = va + vb + vc
-            w1, w2 = vb / den, vc / den
-            w0 = 1.0 - w1 - w2
         r, r0 = np.empty(3), np.empty(3)
         for j in range(3):
             r[j] = x[p, j] - (w0 * x[a, j] + w1 * x[b, j] + w2 * x[cc, j])
@@ -652,10 +751,17 @@ def _numba_kernels() -> tuple:
             from numba import njit
         except ImportError:  # pragma: no cover
             return _KERNELS
+        jit = njit(cache=True, error_model="numpy")
+        g = globals()
+        g["_dot3"] = jit(_dot3)  # the loops below call these three
+        g["_bary"], g["_seg_st"] = jit(_bary), jit(_seg_st)
         _KERNELS = tuple(
-            njit(cache=True, error_model="numpy")(f)
-            for f in (_gs_normal, _gs_friction, _pairs_kernel, _motion_kernel)
-        )
+            jit(f)
+            for f in (
+                _gs_normal, _gs_friction, _pairs_kernel, _motion_kernel, _pt_dist_kernel,
+                _ee_dist_kernel, _ee_kernel,
+            )
+        )  # fmt: skip
     return _KERNELS
 
 
@@ -867,11 +973,7 @@ def _crossings(cands: CandidateList, surface, x0, x1, eps) -> tuple[IntArray, In
         s = np.flatnonzero(dist0 - _relative_motion(D1, g, split) <= reach)
         if s.size:
             gs = g[s]
-            if split == 1:
-                q, _ = closest_point_triangle(*(x1[gs[:, k]] for k in range(4)))
-                dist = np.linalg.norm(x1[gs[:, 0]] - q, axis=1)
-            else:
-                dist = segment_distance(*(x1[gs[:, k]] for k in range(4)))
+            dist = _pt_distances(x1, gs) if split == 1 else _ee_distances(x1, gs)
             s = s[dist <= _relative_motion(step, gs, split) + eps]
         out.append(s)
     s_pt, s_ee = out
@@ -1071,7 +1173,7 @@ def _contacts_now(x0, xs, surface, cands: CandidateList, d, tol, edges, kernel) 
     if not edges:
         return c
     sel = np.flatnonzero(cands.ee_dist - _relative_motion(D, cands.ee_nodes, 2) < d)
-    ce = edge_contacts(x0, xs, surface, cands.ee[sel])
+    ce = edge_contacts(x0, xs, surface, cands.ee[sel], kernel=kernel)
     close = ce.gap < d + tol
     ce = _closest_per_key(PairContacts(*(a[close] for a in ce)), cands.ee[sel][close, 0])
     return PairContacts(*(np.concatenate([a, b]) for a, b in zip(c, ce, strict=True)))

@@ -233,9 +233,9 @@ def test_candidate_list_survives_rigid_motion_and_stays_complete():
 
 
 def test_compiled_narrow_phase_matches_numpy():
-    """The numba loop of pair_contacts gives the numpy reference's gaps, normals and
-    weights to round-off on random node-triangle pairs (face, edge and vertex regions,
-    nodes on either side at the step's start)."""
+    """The numba loops (node-triangle and edge-edge contacts, distances, relative-motion
+    bounds) give the numpy references' values to round-off on random pairs (face, edge and
+    vertex regions, nodes on either side at the step's start)."""
     if not sc._numba_kernels():
         pytest.skip("numba not importable")
     rng = np.random.default_rng(3)
@@ -250,7 +250,23 @@ def test_compiled_narrow_phase_matches_numpy():
     b = sc.pair_contacts(x0, x, surf, node, tri, kernel="numba")
     for u, w in zip(a[1:4], b[1:4], strict=True):
         np.testing.assert_allclose(u, w, atol=1e-12)
-    D = rng.normal(size=(400, 3))
     g = np.column_stack([node, surf.triangles[tri]])
+    ref, _ = sc.closest_point_triangle(*(x[g[:, k]] for k in range(4)))
+    np.testing.assert_allclose(
+        sc._pt_distances(x, g), np.linalg.norm(x[g[:, 0]] - ref, axis=1), atol=1e-13
+    )
+    edges = rng.integers(0, 400, size=(200, 2))
+    edges = edges[edges[:, 0] != edges[:, 1]]
+    surf = sc.FabricSurface(surf.triangles, surf.cell_of, edges, 400, surf.near_keys, 1)
+    ee = rng.integers(0, len(edges), size=(300, 2))
+    a = sc.edge_contacts(x0, x, surf, ee, kernel="numpy")
+    b = sc.edge_contacts(x0, x, surf, ee, kernel="numba")
+    for u, w in zip(a[1:4], b[1:4], strict=True):
+        np.testing.assert_allclose(u, w, atol=1e-12)
+    gi = np.column_stack([edges[ee[:, 0]], edges[ee[:, 1]]])
+    np.testing.assert_allclose(
+        sc._ee_distances(x, gi), sc.segment_distance(*(x[gi[:, k]] for k in range(4))), atol=1e-13
+    )
+    D = rng.normal(size=(400, 3))
     exact = np.max([np.linalg.norm(D[g[:, 0]] - D[g[:, k]], axis=1) for k in (1, 2, 3)], axis=0)
     np.testing.assert_allclose(sc._relative_motion(D, g, 1), exact, rtol=1e-14)
