@@ -373,9 +373,9 @@ def run_cases(
             )
             if resume:
                 cmd = [*cmd, "--resume"]
-            else:
-                for stale in ("summary.json", "history.csv", "case.json"):
-                    (folder / stale).unlink(missing_ok=True)
+            else:  # the case folder is this driver's: a new run starts in an empty one
+                shutil.rmtree(folder)
+                folder.mkdir(parents=True)
             (folder / "command.txt").write_text(shlex.join(cmd) + "\n")
             print(
                 f"[{study_dir.name}/{case.name}] {'resuming' if resume else 'running'} ...",

@@ -63,7 +63,16 @@ def run(
         "output.png=false",
     ]
     sets += [f"contact.kernel={kernel}"] if integrator == "explicit" else []
-    cmd = [sys.executable, "-m", "clothfem.cli", "run", str(SCENE), "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "clothfem.cli",
+        "run",
+        str(SCENE),
+        "--out",
+        str(out),
+        "--overwrite",
+    ]
     cmd += [a for s in sets for a in ("--set", s)]
     cmd += SOLVES[solve] if integrator == "newmark" else []
     if ranks > 1:

@@ -6,8 +6,8 @@ Both models are built on the same sleeve (crimped cotton, t = 1 mm, the scene's 
 n_along cells) with the same random state; ``ShellModel.forces`` (one internal-force
 assembly with the director update and the nodal chain rule, what the explicit step calls
 once per step on a new state) is timed on two alternating states, in rounds that alternate
-the two models, and the ratio of the medians is reported. Times are the process CPU time (time.process_time), so that
-other jobs on the machine change them less than they change wall time.
+the two models, and the ratio of the medians is reported. Times are the process CPU time
+(time.process_time), so that other jobs on the machine change them less than wall time.
 
     .venv/bin/python benchmarks/element_cost.py [--mesh 24x30] [--calls 200] [--rounds 5]
 """

@@ -48,7 +48,7 @@ def main() -> None:
     for i in range(1, args.runs + 1):
         out = Path(args.out) / f"run{i}"
         cmd = [*mpi, sys.executable, "-m", "mpi4py", "-m", "clothfem.cli", "run", args.scene]
-        cmd += ["--out", str(out), *args.extra]
+        cmd += ["--out", str(out), "--overwrite", *args.extra]
         res = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if res.returncode != 0:
             print(f"run {i}: exit {res.returncode}\n{res.stderr[-2000:]}", flush=True)
