@@ -9,8 +9,10 @@ and side-aware normals -> position projection (mass-weighted, Eq. 25 per pair) -
 normal impulses -> Coulomb friction impulses -> continuous crossing check over the step
 (node-triangle and edge-edge) -> impact zones -> diagnostics.
 
-The response stages run as projected Gauss-Seidel sweeps compiled by numba (Debian's
-python3-numba) when it imports, else as an accelerated projected Jacobi in NumPy.
+The response stages run as projected Gauss-Seidel sweeps and the distance loops of the
+narrow phase as plain loops, compiled by numba (Debian's python3-numba) on first use when it
+imports; without numba the NumPy references run (an accelerated projected Jacobi for the
+response, vectorised geometry), tested to agree.
 
 Conventions:
 
@@ -1212,7 +1214,7 @@ class SelfContactRecord:
 
     time: float  # of the window's last step [s]
     steps: int  # explicit steps in the window
-    contacts: int  # node-triangle pairs in contact in the last step
+    contacts: int  # node-triangle and edge-edge pairs in contact in the last step
     max_deficit: float  # largest d - gap of a predictor in the window [m] (0: none closer)
     min_gap: float  # smallest pair gap after the corrections in the window [m]
     normal_impulse: float  # sum of the normal impulses, mean over the window's steps [N s]
