@@ -290,9 +290,10 @@ class Tiles(NamedTuple):
         return float(np.max(rmax[a] + np.sqrt(np.einsum("ij,ij->i", dm, dm)) + rmax[b]))
 
 
-def _tiles(x: FloatArray, *, longest: float, distance: float) -> Tiles:
-    """Tiles of edge ``3 longest + distance`` over the nodes ``x`` and their touching pairs."""
-    size = 3.0 * longest + distance
+def _tiles(x: FloatArray, *, longest: float, distance: float, skin: float) -> Tiles:
+    """Tiles of edge ``3 longest + distance + 2 skin`` over the nodes ``x`` and their
+    touching pairs (any node may then move ``longest + skin`` before the list expires)."""
+    size = 3.0 * longest + distance + 2.0 * skin
     key = np.floor(x / size).astype(np.int64)
     key -= key.min(axis=0) - 1
     base = int(key.max()) + 2
@@ -368,7 +369,7 @@ def build_candidates(
     return CandidateList(
         x.copy(), float(skin), node[keep], t[keep], dist[keep], ee[close], ed[close],
         np.column_stack([node[keep], tri[t[keep]]]), edge[ee[close]].reshape(-1, 4),
-        _tiles(x, longest=length, distance=distance),
+        _tiles(x, longest=length, distance=distance, skin=skin),
     )  # fmt: skip
 
 
@@ -1102,7 +1103,9 @@ def _list_for(cands, x_now, x_other, surface, p: SelfContactParameters, both=Tru
     if cands is not None and cands.valid(*((x_now, x_other) if both else (x_now,))):
         return cands, False
     span = float(np.max(_moved(x_now, x_other), initial=0.0))
-    skin = max(p.skin_length, 4.0 * span)  # the list outlives this step
+    # valid at x_other too: every node within span of the build, so the tile bound is at
+    # most 6 span < skin and no node is past the allowed displacement (skin + L)
+    skin = max(p.skin_length, 8.0 * span)
     c = build_candidates(x_now, surface, distance=p.distance, skin=skin, edges=p.edge_proximity)
     return c, True
 
