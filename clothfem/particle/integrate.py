@@ -230,17 +230,17 @@ def solve_static(
     max_iter: int = 200,
 ) -> tuple[ParticleState, int]:
     """Static equilibrium (spring + gravity forces, supports at their positions at
-    ``state.t``) by Newton's method with the exact sparse tangent and a Levenberg-Marquardt
-    shift ``mu M`` where a full step does not reduce the out-of-balance force (a backward-
-    Euler step of ``1 / sqrt(mu)`` with the velocity reset, i.e. pseudo-transient
-    continuation). From ``state`` (default: the reference); converged when the largest
-    out-of-balance force of a free node is below ``gtol`` x the largest nodal weight or the
-    round-off floor of the spring forces (100 eps k_max |x|_max). Where no step reduces the
-    out-of-balance force any more (Choi & Ko's tension-free flexion springs switch off at
-    their rest length: the forces have a kink there), or five steps reduce it by less than
-    10 %, the state is accepted if that force is below ``accept`` x the largest nodal weight
-    (``state.a`` gives the imbalance).
-    Returns the state at rest and the Newton iterations."""
+    ``state.t``): the minimum of the potential energy by Newton's method with the exact
+    sparse tangent and a Levenberg-Marquardt shift ``mu M`` (a backward-Euler step of
+    ``1 / sqrt(mu)`` with the velocity reset: pseudo-transient continuation), raised until
+    the step lowers the energy (or, within the energy's round-off, the out-of-balance force).
+    From ``state`` (default: the reference); converged when the largest out-of-balance
+    force of a free node is below ``gtol`` x the largest nodal weight or the round-off floor
+    of the spring forces (100 eps k_max |x|_max). Where no step makes progress any more
+    (Choi & Ko's tension-free flexion springs switch off at their rest length: the forces
+    have a kink there), or five steps reduce the force by less than 10 %, the state is
+    accepted if that force is below ``accept`` x the largest nodal weight (``state.a`` gives
+    the imbalance). Returns the state at rest and the Newton iterations."""
     state = state or ParticleState.at_rest(model)
     free = np.repeat(~model.fixed, 3)
     x = state.x.copy()
@@ -254,7 +254,11 @@ def solve_static(
     def residual(y):
         return (internal_forces(model, y) + fg).ravel()[free]
 
-    r = residual(x)
+    def energy(y):
+        e = energies(model, ParticleState(t=state.t, x=y, v=zero, a=zero))
+        return e.spring + e.gravity, 1e-12 * (abs(e.spring) + abs(e.gravity))
+
+    r, (e, _) = residual(x), energy(x)
     mu = 0.0
     mu0 = 1e-6 * float(np.max(model.fabric.stiffness)) / float(model.mass.min())
     norms = [float(np.linalg.norm(r))]
@@ -264,24 +268,24 @@ def solve_static(
         stalled = len(norms) > 5 and norms[-1] > 0.9 * norms[-6]
         if stalled and np.abs(r).max() <= accept * ref:
             return _at_rest(model, state.t, x), it - 1
-        K, _ = tangent(model, x, zero)
-        H = (-K).tocsr()[free][:, free]
+        H = (-tangent(model, x, zero)[0]).tocsr()[free][:, free]
         while True:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", MatrixRankWarning)  # singular: shift it
                 dz = spsolve((H + diags(mu * m3)).tocsc(), r)
             trial = x.copy()
             trial.reshape(-1)[free] += dz
-            rt = residual(trial)
-            if np.all(np.isfinite(rt)) and np.linalg.norm(rt) < np.linalg.norm(r):
-                x, r, mu = trial, rt, 0.1 * mu if mu > 10 * mu0 else 0.0
+            rt, (et, tol) = residual(trial), energy(trial)
+            smaller = np.linalg.norm(rt) < np.linalg.norm(r)
+            if np.all(np.isfinite(rt)) and (et < e - tol or (et <= e + tol and smaller)):
+                x, r, e, mu = trial, rt, et, 0.1 * mu if mu > 10 * mu0 else 0.0
                 norms.append(float(np.linalg.norm(r)))
                 break
             mu = max(10.0 * mu, mu0)
             if mu > 1e12 * mu0:
                 if np.abs(r).max() <= accept * ref:
                     return _at_rest(model, state.t, x), it
-                raise RuntimeError("solve_static: no descent step (the tangent is singular)")
+                raise RuntimeError("solve_static: no step lowers the energy (singular tangent)")
     raise RuntimeError(f"solve_static: not converged in {max_iter} Newton iterations")
 
 

@@ -8,6 +8,7 @@ shell solve, which is collective: the tests run unchanged on 2 MPI ranks.
 
 import numpy as np
 import pytest
+from mpi4py import MPI
 
 from clothfem import particle as pm
 from clothfem.body import Ellipsoid
@@ -47,6 +48,9 @@ def test_no_node_inside_the_sphere_after_the_film_correction(drape):
     assert gaps.min() > -1e-12  # film_step's own gaps, every step
     assert worst > -1e-12  # an independent closest-point check of every step's positions
     assert np.count_nonzero(np.linalg.norm(forces, axis=1)) > 0.9 * len(forces)
+    # every rank advanced the whole sheet: the same positions bit for bit on every rank
+    digest = state.x.tobytes()
+    assert all(d == digest for d in MPI.COMM_WORLD.allgather(digest))
 
 
 def test_contact_force_balances_the_weight_at_rest(drape):
