@@ -55,6 +55,7 @@ __all__ = [
     "SelfContactRecord",
     "SelfContactResult",
     "build_candidates",
+    "check_resolution",
     "closest_point_triangle",
     "edge_contacts",
     "edge_edge_crossings",
@@ -109,18 +110,22 @@ class FabricSurface:
     rings: int
 
 
-def fabric_surface(cells: ArrayLike, *, n_nodes: int, rings: int = 1) -> FabricSurface:
+def fabric_surface(cells: ArrayLike, *, n_nodes: int, rings: int = 0) -> FabricSurface:
     """Surface of 9-node ``cells`` (C, 9) on ``n_nodes`` nodes. Nodes ``a``, ``b`` are *near*
-    (excluded from contact) when a chain of at most ``rings`` (>= 1) cells, consecutive ones
-    sharing a node, joins them; ``rings = 1``: they share a cell."""
-    if int(rings) != rings or rings < 1:
-        raise ValueError(f"rings must be an integer >= 1, got {rings!r}")
+    (excluded from contact) when ``a == b`` (``rings = 0``: a node never contacts its own
+    triangles, an edge never an edge sharing a node) or when a chain of at most ``rings``
+    cells, consecutive ones sharing a node, joins them (``rings = 1``: they share a cell)."""
+    if int(rings) != rings or rings < 0:
+        raise ValueError(f"rings must be an integer >= 0, got {rings!r}")
     c = np.asarray(cells, dtype=np.intp)
     tri, cell_of = triangulate_q9(c)
     if c.size and (c.min() < 0 or c.max() >= n_nodes):
         raise ValueError(f"cells must index nodes 0..{n_nodes - 1}, got {c.min()}..{c.max()}")
     e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
     edges = np.unique(e, axis=0)
+    if rings == 0:
+        keys = np.arange(n_nodes, dtype=np.int64) * (n_nodes + 1)
+        return FabricSurface(tri, cell_of, edges, int(n_nodes), keys, 0)
     inc = sp.csr_matrix(
         (np.ones(c.size), (np.repeat(np.arange(len(c)), 9), c.ravel())), shape=(len(c), n_nodes)
     )
@@ -255,8 +260,7 @@ class CandidateList:
         A pair's distance changes by at most the largest relative displacement (since the
         build) of a node of one side and a node of the other. Nodes in the same or adjacent
         tiles (edge ``R``) stay within ``skin`` of each other's displacement when each
-        node's displacement from its tile's first node plus the difference of the first
-        nodes' displacements do;
+        node's displacement from its tile's mean plus the difference of the tile means do;
         nodes farther apart were at least ``R - L`` from each other's pairs (``L`` the longest
         edge) and stay apart while no node moved more than ``(R - L - distance) / 2``. Rigid
         motion of a region costs nothing but the rotation across a few tiles."""
@@ -277,16 +281,17 @@ class Tiles(NamedTuple):
 
     def spread(self, D: FloatArray) -> float:
         """The relative-displacement bound of nodes in touching tiles for displacements
-        ``D`` (N, 3) [m] (each node against its tile's first node, plus the difference of
-        the first nodes of the two tiles), inf when a node moved more than ``far``."""
+        ``D`` (N, 3) [m] (each node against its tile's mean, plus the difference of the two
+        tiles' means), inf when a node moved more than ``far``."""
         if float(np.max(np.einsum("ij,ij->i", D, D), initial=0.0)) > self.far**2:
             return np.inf
-        ref = D[self.order[self.starts]]  # the first node of each tile
-        r = D - ref[self.tile]
-        r = np.sqrt(np.einsum("ij,ij->i", r, r))
-        rmax = np.maximum.reduceat(r[self.order], self.starts)
+        Ds = D[self.order]
+        counts = np.diff(np.r_[self.starts, len(D)])
+        mean = np.add.reduceat(Ds, self.starts, axis=0) / counts[:, None]
+        r = Ds - np.repeat(mean, counts, axis=0)
+        rmax = np.maximum.reduceat(np.sqrt(np.einsum("ij,ij->i", r, r)), self.starts)
         a, b = self.pairs[:, 0], self.pairs[:, 1]
-        dm = ref[a] - ref[b]
+        dm = mean[a] - mean[b]
         return float(np.max(rmax[a] + np.sqrt(np.einsum("ij,ij->i", dm, dm)) + rmax[b]))
 
 
@@ -1024,8 +1029,9 @@ def _impact_zones(
 @dataclass(frozen=True, kw_only=True)
 class SelfContactParameters:
     """distance: contact distance d [m] between mid-surfaces (> 0; the fabric thickness or a
-    multiple of it); mu: Coulomb coefficient between layers (>= 0); rings: cell rings around
-    a node excluded from its contacts (>= 1); skin: Verlet-list skin [m] (> 0; default 2
+    multiple of it); mu: Coulomb coefficient between layers (>= 0); rings: 0 (default) a
+    node never contacts its own triangles nor an edge one sharing a node, k >= 1 nor the
+    triangles of nodes within k cell rings; skin: Verlet-list skin [m] (> 0; default 2
     d); passes: sweeps / iterations of each response stage (>= 1); tolerance: allowed gap
     deficit, fraction of d (0 < tol < 1); failsafe_passes: crossing checks and impact-zone
     merges per step (>= 1); eps: crossing proximity, fraction of d (0 < eps < 0.005); kernel:
@@ -1036,7 +1042,7 @@ class SelfContactParameters:
 
     distance: float
     mu: float = 0.0
-    rings: int = 1
+    rings: int = 0
     skin: float | None = None
     passes: int = 50
     tolerance: float = 0.01
@@ -1055,7 +1061,9 @@ class SelfContactParameters:
             bad("mu", self.mu, ">= 0")
         if self.skin is not None and not (np.isfinite(self.skin) and self.skin > 0):
             bad("skin", self.skin, "None or > 0 m")
-        for name in ("rings", "passes", "failsafe_passes"):
+        if int(self.rings) != self.rings or self.rings < 0:
+            bad("rings", self.rings, "an integer >= 0")
+        for name in ("passes", "failsafe_passes"):
             val = getattr(self, name)
             if int(val) != val or val < 1:
                 bad(name, val, "an integer >= 1")
@@ -1242,6 +1250,25 @@ def global_cells(V) -> tuple[IntArray, int, int]:
     return cells, int(im.size_global), int(im.local_range[0])
 
 
+def check_resolution(x: FloatArray, cells: IntArray, surface: FabricSurface, d: float) -> None:
+    """Raise ValueError if, at ``x``, a node is closer than ``d`` [m] to a triangle of a cell
+    sharing a node with it that the surface's exclusion does not cover: on a smooth surface
+    the contact distance must stay below the mesh's in-surface node-triangle gaps."""
+    if surface.rings > 0:
+        return
+    c = build_candidates(x, surface, distance=d, skin=1e-9 * d, edges=False)
+    if len(c.pt_dist) == 0:
+        return
+    ring = fabric_surface(cells, n_nodes=surface.n_nodes, rings=1)
+    smooth = ~_far(ring, c.pt_nodes[:, :1], c.pt_nodes[:, 1:])
+    if np.any(smooth & (c.pt_dist < d)):
+        gap = float(c.pt_dist[smooth].min())
+        raise ValueError(
+            f"self-contact distance must be below the mesh's in-surface node-triangle gap "
+            f"{gap:.3g} m with rings = 0, got {d!r} (refine d or use rings = 1)"
+        )
+
+
 def mesh_nodes(mesh) -> tuple[FloatArray, IntArray]:
     """Node positions (N, 3) [m] and 9-node cells (C, 9) of an order-2 quadrilateral dolfinx
     ``mesh`` in the numbering of its Q2 space, the whole mesh on every rank (collective)."""
@@ -1273,6 +1300,7 @@ class SelfContact:
         self.surface = fabric_surface(cells, n_nodes=n_glob, rings=params.rings)
         self._counts = np.array(self.comm.allgather(3 * n))
         self.X = self._gather(self.model.x_nodes[:n])
+        check_resolution(self.X, cells, self.surface, params.distance)
         self.mass = self._gather(np.repeat(system.lumped_u[0 : 3 * n : 3], 3).reshape(n, 3))[:, 0]
         self.fixed = np.zeros(n_glob, dtype=bool)
         self._rows: np.ndarray | None = None

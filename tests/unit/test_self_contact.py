@@ -63,7 +63,10 @@ def test_smooth_surfaces_never_contact_themselves():
 
 def test_near_pairs_are_the_cell_ring(strip):
     X, cells = strip
-    surf = sc.fabric_surface(cells, n_nodes=len(X))
+    own = sc.fabric_surface(cells, n_nodes=len(X))  # rings = 0: a node is near itself only
+    a = np.arange(len(X))
+    assert sc.near_pairs(own, a, a).all() and not sc.near_pairs(own, a[:-1], a[1:]).any()
+    surf = sc.fabric_surface(cells, n_nodes=len(X), rings=1)
     a, b = np.meshgrid(np.arange(len(X)), np.arange(len(X)), indexing="ij")
     near = sc.near_pairs(surf, a.ravel(), b.ravel()).reshape(a.shape)
     share = np.zeros_like(near)
@@ -71,6 +74,9 @@ def test_near_pairs_are_the_cell_ring(strip):
         share[np.ix_(c, c)] = True
     np.testing.assert_array_equal(near, share)
     two = sc.fabric_surface(cells, n_nodes=len(X), rings=2)
+    with pytest.raises(ValueError, match="in-surface node-triangle gap"):
+        sc.check_resolution(X, cells, own, 0.004)  # cells 10 mm: gaps ~3.5 mm
+    sc.check_resolution(X, cells, own, 0.001)
     assert two.near_keys.size > surf.near_keys.size
 
 
@@ -156,7 +162,7 @@ def test_intersections_of_crossing_and_separate_triangles():
     [
         ({"distance": 0.0}, "distance must be > 0 m"),
         ({"distance": 1e-3, "mu": -1.0}, "mu must be >= 0"),
-        ({"distance": 1e-3, "rings": 0}, "rings must be an integer >= 1"),
+        ({"distance": 1e-3, "rings": -1}, "rings must be an integer >= 0"),
         ({"distance": 1e-3, "skin": -1.0}, "skin must be None or > 0 m"),
         ({"distance": 1e-3, "tolerance": 1.0}, "tolerance must be in \\(0, 1\\)"),
     ],
