@@ -438,18 +438,20 @@ class ShellModel:
 
     def _psri_weight(self, factor: float) -> fem.Function:
         """Cellwise PSRI weight alpha = min(1, factor t^2 / h^2) (DG0), h the cell diameter
-        (largest distance between two of its vertices, as UFL's CellDiameter)."""
+        (largest distance between two of its vertices, as UFL's CellDiameter). Collective;
+        a rank may hold no cells."""
         W = fem.FunctionSpace(self.mesh, ("DG", 0))
-        geo = self.mesh.geometry
-        n_vertices = 4 if self.mesh.topology.cell_type.name == "quadrilateral" else 3
-        corners = geo.x[geo.dofmap.array.reshape(-1, geo.dofmap.offsets[1])[:, :n_vertices]]
-        pairs = [(a, b) for a in range(n_vertices) for b in range(a + 1, n_vertices)]
-        h = np.max([np.linalg.norm(corners[:, a] - corners[:, b], axis=1) for a, b in pairs], 0)
         alpha = fem.Function(W, name="psri_weight")
-        cells = np.arange(len(h), dtype=np.int32)
-        alpha.x.array[W.dofmap.list.array.reshape(-1)[cells]] = np.minimum(
-            1.0, factor * self.thickness**2 / h**2
-        )
+        geo = self.mesh.geometry
+        n_cells = len(geo.dofmap.offsets) - 1  # owned and ghost cells of this rank
+        if n_cells:
+            n_vertices = 4 if self.mesh.topology.cell_type.name == "quadrilateral" else 3
+            nodes = geo.dofmap.array.reshape(n_cells, -1)[:, :n_vertices]
+            corners = geo.x[nodes]
+            pairs = [(a, b) for a in range(n_vertices) for b in range(a + 1, n_vertices)]
+            h = np.max([np.linalg.norm(corners[:, a] - corners[:, b], axis=1) for a, b in pairs], 0)
+            dofs = W.dofmap.list.array.reshape(-1)[:n_cells]
+            alpha.x.array[dofs] = np.minimum(1.0, factor * self.thickness**2 / h**2)
         alpha.x.scatter_forward()
         return alpha
 
