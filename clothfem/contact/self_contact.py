@@ -402,9 +402,10 @@ def pair_contacts(
     kernel: str = "numpy",
 ) -> PairContacts:
     """Gaps and normals of node-triangle pairs at ``x``. Closest point inside the face: the
-    triangle normal, signed by the side the node was on at the step's start ``x0`` (so a
-    node that passed through the face gets ``gap < 0``); on an edge or vertex: the direction
-    from the closest point to the node. ``kernel``: "numpy", or "numba"/"auto" for the
+    triangle normal, signed by the side the node was on at the step's start ``x0`` when the
+    pair's motion over the step can have taken it through the plane (then a node that
+    passed through the face gets ``gap < 0``), else by its side now; on an edge or vertex:
+    the direction from the closest point to the node. ``kernel``: "numpy", or "numba"/"auto" for the
     compiled loop (the same operations pair by pair)."""
     t = surface.triangles[tri]
     idx = np.column_stack([node, t])
@@ -417,10 +418,14 @@ def pair_contacts(
     r = x[node] - q
     dist = np.linalg.norm(r, axis=1)
     nf = _unit_normals(x, t)
-    q0 = np.einsum("ij,ijk->ik", w, x0[t])
-    side = np.sign(_dot(x0[node] - q0, _unit_normals(x0, t)))
-    side = np.where(side == 0, np.sign(_dot(r, nf)), side)
-    side = np.where(side == 0, 1.0, side)
+    r0 = x0[node] - np.einsum("ij,ijk->ik", w, x0[t])
+    n0 = _unit_normals(x0, t)
+    s0, s1 = _dot(r0, n0), _dot(r, nf)
+    now = np.where(s1 < 0, -1.0, 1.0)
+    # the start's side counts only if the plane distance can have changed sign in the step
+    turn = np.linalg.norm(r0, axis=1) * np.linalg.norm(nf - n0, axis=1)
+    can = np.abs(s0) + np.abs(s1) <= _relative_motion(x - x0, idx, 1) + turn + 1e-15 * scale
+    side = np.where((s0 != 0) & can, np.sign(s0), now)
     face = np.all(w > _FACE_EPS, axis=1) | (dist <= 1e-12 * scale)
     with np.errstate(invalid="ignore", divide="ignore"):
         n = np.where(face[:, None], side[:, None] * nf, r / dist[:, None])
@@ -719,11 +724,20 @@ def _pairs_kernel(x0, x, idx, scale, face_eps, coef, normal, gap):  # pragma: no
         n0 = np.cross(e1, e2)
         l0 = np.sqrt(n0 @ n0)
         n0 = n0 / l0 if l0 > 0 else n0 * 0.0
-        side = np.sign(r0 @ n0)
-        if side == 0:
-            side = np.sign(r @ nf)
-        if side == 0:
-            side = 1.0
+        s0, s1 = r0 @ n0, r @ nf
+        now = -1.0 if s1 < 0 else 1.0
+        rel, dn = 0.0, 0.0
+        for k in (a, b, cc):
+            q = 0.0
+            for j in range(3):
+                dd = (x[p, j] - x0[p, j]) - (x[k, j] - x0[k, j])
+                q += dd * dd
+            rel = max(rel, q)
+        for j in range(3):
+            dn += (nf[j] - n0[j]) ** 2
+        turn = np.sqrt(r0 @ r0) * np.sqrt(dn)
+        can = abs(s0) + abs(s1) <= np.sqrt(rel) + turn + 1e-15 * scale
+        side = np.sign(s0) if (s0 != 0 and can) else now
         face = (w0 > face_eps and w1 > face_eps and w2 > face_eps) or dist <= 1e-12 * scale
         for j in range(3):
             normal[c, j] = side * nf[j] if face else r[j] / dist

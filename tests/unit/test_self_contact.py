@@ -49,8 +49,9 @@ def test_segment_distance_matches_the_independent_one():
 
 
 def test_smooth_surfaces_never_contact_themselves():
-    """A flat strip and a tube have no candidate pairs at the thickness (the excluded cell
-    ring covers everything closer than half a cell)."""
+    """A flat strip and a tube have no candidate pairs at the thickness: with only a node's
+    own triangles excluded, every other node-triangle pair of a smooth surface is about a
+    third of a cell apart."""
     for sm in (
         meshes.strip(MPI.COMM_SELF, length=0.1, width=0.05, nx=10, ny=5),
         meshes.cylinder(MPI.COMM_SELF, radius=0.06, length=0.1, n_around=16, n_along=4),
