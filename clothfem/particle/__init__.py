@@ -39,6 +39,7 @@ from .network import (
     grid_cells,
     network_from_grid,
     network_from_mesh,
+    regular_patch,
 )
 from .rule import (
     ParticleFabric,
@@ -73,6 +74,7 @@ __all__ = [
     "limit_strain",
     "network_from_grid",
     "network_from_mesh",
+    "regular_patch",
     "solve_static",
     "stable_time_step",
     "step_explicit",

@@ -39,7 +39,7 @@ column with pinned ends (a circular arc of length L0 through both ends): its for
 ``f_b = B kappa^2 / (sinc(kappa L0 / 2) - cos(kappa L0 / 2))`` with ``|x_ij| = L0 sinc(kappa L0
 / 2)``, which starts at ``12 B / L0^2`` and rises to ``4 pi^2 B / L0^2`` as the ends meet. The
 compressive force joins the linear pre-buckling branch ``k delta`` and the column smoothly,
-``P = (k delta)^-p + f_b^-p)^(-1/p)`` with p = 4 (within 16 % of ``min(k delta, f_b)``, equal
+``P = ((k delta)^-p + f_b^-p)^(-1/p)`` with p = 4 (within 16 % of ``min(k delta, f_b)``, equal
 to it away from the crossing; a plain ``min`` has a kink at which Newton's method chatters);
 flexion springs carry no tension. Shear springs stay linear.
 
@@ -223,7 +223,7 @@ def fabric_from_material(
             np.add.at(modw, s, 0.5 * A * qbar)
     rig = np.zeros(net.n_springs)
     st = net.kind == STRUCTURAL
-    rig[st] = modw[st] / trib[st] * t**3 / 12.0 * trib[st] / net.rest[st]
+    rig[st] = modw[st] * t**3 / (12.0 * net.rest[st])  # E w t^3 / 12, w = tributary / L
     _flexion(net, k, rig, trib, modw, t, theta2)
     mass_area = np.zeros(n)
     for c in range(4):
