@@ -1122,12 +1122,15 @@ class SelfContactResult(NamedTuple):
 def _list_for(cands, x_now, x_other, surface, p: SelfContactParameters, both=True) -> tuple:
     """The candidate list valid for ``x_now`` and ``x_other`` (rebuilt at ``x_now`` if not;
     ``both=False``: ``x_other`` is known to be valid for ``cands``)."""
-    if cands is not None and cands.valid(*((x_now, x_other) if both else (x_now,))):
-        return cands, False
     span = float(np.max(_moved(x_now, x_other), initial=0.0))
     # valid at x_other too: every node within span of the build, so the tile bound is at
     # most 6 span < skin and no node is past the allowed displacement (skin + L)
     skin = max(p.skin_length, 8.0 * span)
+    # a list widened for one violent step is not kept once the steps are small again
+    oversized = cands is not None and cands.skin > 2.0 * skin
+    if cands is not None and not oversized:
+        if cands.valid(*((x_now, x_other) if both else (x_now,))):
+            return cands, False
     c = build_candidates(x_now, surface, distance=p.distance, skin=skin, edges=p.edge_proximity)
     return c, True
 
