@@ -439,7 +439,8 @@ def edge_contacts(
 ) -> PairContacts:
     """Gaps and normals of edge pairs ``ee`` (M, 2) at ``x``: the normal points from the
     second edge's closest point to the first's, reversed (``gap < 0``) when the same points
-    were on the other side at the step's start ``x0``. ``kernel`` as for
+    were on the other side at the step's start ``x0`` and the pair's motion over the step
+    can have carried one edge through the other. ``kernel`` as for
     :func:`pair_contacts`."""
     e0, e1 = surface.edges[ee[:, 0]], surface.edges[ee[:, 1]]
     idx = np.column_stack([e0, e1])
@@ -455,7 +456,9 @@ def edge_contacts(
     tiny = dist <= 1e-12 * scale
     with np.errstate(invalid="ignore", divide="ignore"):
         n = np.where(tiny[:, None], r0 / np.linalg.norm(r0, axis=1)[:, None], r / dist[:, None])
-    side = np.where(_dot(r0, n) < 0, -1.0, 1.0)
+    # reversed only if the step's relative motion can have carried one edge through the other
+    can = np.linalg.norm(r0, axis=1) + dist <= _relative_motion(x - x0, idx, 2) + 1e-15 * scale
+    side = np.where((_dot(r0, n) < 0) & (can | tiny), -1.0, 1.0)
     n = np.nan_to_num(side[:, None] * n, nan=0.0, posinf=0.0, neginf=0.0)
     return PairContacts(idx, coef, n, _dot(r, n), tri)
 
@@ -692,7 +695,17 @@ def _ee_kernel(x0, x, idx, scale, coef, normal, gap):  # pragma: no cover
                 r0[j] += coef[c, k] * x0[idx[c, k], j]
         dist = np.sqrt(r @ r)
         n = r0 / np.sqrt(r0 @ r0) if dist <= 1e-12 * scale else r / dist
-        side = -1.0 if r0 @ n < 0 else 1.0
+        rel = 0.0
+        for i in range(2):
+            for k in range(2, 4):
+                q = 0.0
+                for j in range(3):
+                    dd = (x[idx[c, i], j] - x0[idx[c, i], j]) - (x[idx[c, k], j] - x0[idx[c, k], j])
+                    q += dd * dd
+                rel = max(rel, q)
+        tiny = dist <= 1e-12 * scale
+        can = np.sqrt(r0 @ r0) + dist <= np.sqrt(rel) + 1e-15 * scale
+        side = -1.0 if (r0 @ n < 0 and (can or tiny)) else 1.0
         for j in range(3):
             v = side * n[j]
             normal[c, j] = v if np.isfinite(v) else 0.0
