@@ -423,8 +423,12 @@ def pair_contacts(
     s0, s1 = _dot(r0, n0), _dot(r, nf)
     now = np.where(s1 < 0, -1.0, 1.0)
     # the start's side counts only if the plane distance can have changed sign in the step
-    turn = np.linalg.norm(r0, axis=1) * np.linalg.norm(nf - n0, axis=1)
+    # (a face that turned by more than ~30 degrees in the step, e.g. a collapsing crease
+    # triangle, gives no reliable side: the crossing check decides there)
+    dn = np.linalg.norm(nf - n0, axis=1)
+    turn = np.linalg.norm(r0, axis=1) * dn
     can = np.abs(s0) + np.abs(s1) <= _relative_motion(x - x0, idx, 1) + turn + 1e-15 * scale
+    can &= dn < 0.5
     side = np.where((s0 != 0) & can, np.sign(s0), now)
     face = np.all(w > _FACE_EPS, axis=1) | (dist <= 1e-12 * scale)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -749,7 +753,7 @@ def _pairs_kernel(x0, x, idx, scale, face_eps, coef, normal, gap):  # pragma: no
         for j in range(3):
             dn += (nf[j] - n0[j]) ** 2
         turn = np.sqrt(r0 @ r0) * np.sqrt(dn)
-        can = abs(s0) + abs(s1) <= np.sqrt(rel) + turn + 1e-15 * scale
+        can = abs(s0) + abs(s1) <= np.sqrt(rel) + turn + 1e-15 * scale and dn < 0.25
         side = np.sign(s0) if (s0 != 0 and can) else now
         face = (w0 > face_eps and w1 > face_eps and w2 > face_eps) or dist <= 1e-12 * scale
         for j in range(3):
