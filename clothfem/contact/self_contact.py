@@ -422,13 +422,11 @@ def pair_contacts(
     n0 = _unit_normals(x0, t)
     s0, s1 = _dot(r0, n0), _dot(r, nf)
     now = np.where(s1 < 0, -1.0, 1.0)
-    # the start's side counts only if the plane distance can have changed sign in the step
-    # (a face that turned by more than ~30 degrees in the step, e.g. a collapsing crease
-    # triangle, gives no reliable side: the crossing check decides there)
-    dn = np.linalg.norm(nf - n0, axis=1)
-    turn = np.linalg.norm(r0, axis=1) * dn
-    can = np.abs(s0) + np.abs(s1) <= _relative_motion(x - x0, idx, 1) + turn + 1e-15 * scale
-    can &= dn < 0.5
+    # the start's side counts only if the step's relative motion can have carried the node
+    # through the face (a node-triangle distance changes by at most that motion, and
+    # |r0| bounds the distance at the start); otherwise the crossing check decides
+    reach = _relative_motion(x - x0, idx, 1) + 1e-15 * scale
+    can = np.linalg.norm(r0, axis=1) + dist <= reach
     side = np.where((s0 != 0) & can, np.sign(s0), now)
     face = np.all(w > _FACE_EPS, axis=1) | (dist <= 1e-12 * scale)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -743,17 +741,14 @@ def _pairs_kernel(x0, x, idx, scale, face_eps, coef, normal, gap):  # pragma: no
         n0 = n0 / l0 if l0 > 0 else n0 * 0.0
         s0, s1 = r0 @ n0, r @ nf
         now = -1.0 if s1 < 0 else 1.0
-        rel, dn = 0.0, 0.0
+        rel = 0.0
         for k in (a, b, cc):
             q = 0.0
             for j in range(3):
                 dd = (x[p, j] - x0[p, j]) - (x[k, j] - x0[k, j])
                 q += dd * dd
             rel = max(rel, q)
-        for j in range(3):
-            dn += (nf[j] - n0[j]) ** 2
-        turn = np.sqrt(r0 @ r0) * np.sqrt(dn)
-        can = abs(s0) + abs(s1) <= np.sqrt(rel) + turn + 1e-15 * scale and dn < 0.25
+        can = np.sqrt(r0 @ r0) + dist <= np.sqrt(rel) + 1e-15 * scale
         side = np.sign(s0) if (s0 != 0 and can) else now
         face = (w0 > face_eps and w1 > face_eps and w2 > face_eps) or dist <= 1e-12 * scale
         for j in range(3):
