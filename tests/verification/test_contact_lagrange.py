@@ -185,7 +185,9 @@ def test_sleeve_pulled_along_cylinder_slides_at_mu_N():
     contact = LagrangeContact(model, [_cylinder_body()], params=LagrangeContactParameters(mu=mu))
     _expand(contact)
     n0 = contact.n
-    lams = [0.05, 0.15, 0.25, 0.35, 0.45]
+    # from partial stick (0.05) to sliding in steps of 0.05: one step 0.05 -> 0.15 left the
+    # contact Newton unconverged on 2 ranks with the partial selective element
+    lams = [0.05, 0.1, 0.15, 0.25, 0.35, 0.45]
     recs, pulls = [], []
     for lam in lams:
         rec = contact.solve_step(lam)
