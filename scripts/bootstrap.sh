@@ -8,9 +8,11 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # gcc: dolfinx's form compiler and clothfem's contact loop (clothfem/contact/compiled.py)
-# compile C at run time
+# compile C at run time; python3-numba compiles the self-contact loops (NumPy fallback without
+# it), python3-rich draws the progress bar on a terminal (plain lines without it)
 APT_PKGS=(python3-dolfinx python3-gmsh python3-meshio python3-mpi4py python3-petsc4py
-          python3-ufl python3-scipy python3-venv libopenblas0-pthread gcc)
+          python3-ufl python3-scipy python3-venv libopenblas0-pthread gcc
+          python3-numba python3-rich)
 
 missing=()
 for p in "${APT_PKGS[@]}"; do
