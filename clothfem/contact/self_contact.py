@@ -1113,7 +1113,9 @@ class SelfContactResult(NamedTuple):
     the predictor [m]; ``min_gap`` the smallest pair gap after [m] (inf: no pair);
     ``crossings`` crossing pairs found in the first fail-safe pass, ``crossings_left`` after
     the last; ``zone_nodes`` nodes moved as impact zones; ``rebuilt`` whether the candidate
-    list was rebuilt; ``candidates`` the list (pass it to the next step)."""
+    list was rebuilt; ``candidates`` the list (pass it to the next step); ``covered`` False
+    when the capped skin could not cover a node's motion in the step (the crossing check
+    then saw only the pairs near the end of the step)."""
 
     x: FloatArray
     v: FloatArray
@@ -1129,22 +1131,27 @@ class SelfContactResult(NamedTuple):
     zone_nodes: int
     rebuilt: bool
     candidates: CandidateList
+    covered: bool
 
 
 def _list_for(cands, x_now, x_other, surface, p: SelfContactParameters, both=True) -> tuple:
     """The candidate list valid for ``x_now`` and ``x_other`` (rebuilt at ``x_now`` if not;
-    ``both=False``: ``x_other`` is known to be valid for ``cands``)."""
+    ``both=False``: ``x_other`` is known to be valid for ``cands``), whether it was rebuilt,
+    and whether it covers the step (False only when the skin cap of 10 d left ``x_other``
+    outside a rebuilt list: a node moved more than about d in the step)."""
     span = float(np.max(_moved(x_now, x_other), initial=0.0))
     # valid at x_other too: every node within span of the build, so the tile bound is at
-    # most 6 span < skin and no node is past the allowed displacement (skin + L)
-    skin = max(p.skin_length, 8.0 * span)
+    # most 6 span < skin and no node is past the allowed displacement (skin + L); capped,
+    # so that one violent step cannot build a list of the whole garment
+    cap = max(p.skin_length, 10.0 * p.distance)
+    skin = min(max(p.skin_length, 8.0 * span), cap)
     # a list widened for one violent step is not kept once the steps are small again
     oversized = cands is not None and cands.skin > 2.0 * skin
     if cands is not None and not oversized:
         if cands.valid(*((x_now, x_other) if both else (x_now,))):
-            return cands, False
+            return cands, False, True
     c = build_candidates(x_now, surface, distance=p.distance, skin=skin, edges=p.edge_proximity)
-    return c, True
+    return c, True, skin >= 6.5 * span or c.valid(x_other)
 
 
 def self_contact_step(
@@ -1174,7 +1181,7 @@ def self_contact_step(
     fx = np.zeros(n, dtype=bool) if fixed is None else np.asarray(fixed, dtype=bool)
     inv_m = np.where(fx, 0.0, 1.0 / m)
     d, tol = p.distance, p.tolerance * p.distance
-    cands, rebuilt = _list_for(candidates, xs, x0, surface, p)
+    cands, rebuilt, covered = _list_for(candidates, xs, x0, surface, p)
     c = _contacts_now(x0, xs, surface, cands, d, tol, p.edge_proximity, p.kernel)
     x, v = xs.copy(), vs.copy()
     lam, jn = np.zeros(len(c.gap)), np.zeros(len(c.gap))
@@ -1187,12 +1194,12 @@ def self_contact_step(
             v1, jt, stick = friction_impulses(v, c, inv_m, jn, mu=p.mu, tol=1e-9 * _speed(vs), **k)
             x += dt * (v1 - v)
             v = v1
-    x, v, found, left, zone, cands2 = _failsafe(x0, x, v, m, fx, surface, cands, p)
+    x, v, found, left, zone, cands2, covered2 = _failsafe(x0, x, v, m, fx, surface, cands, p)
     return SelfContactResult(
         x, v, c, lam, jn, jt, stick,
         float(np.max(d - c.gap, initial=0.0)),
         float(np.min(_dot(_relative(x, c.idx, c.coef), c.normal), initial=np.inf)),
-        found, left, zone, rebuilt or cands2 is not cands, cands2,
+        found, left, zone, rebuilt or cands2 is not cands, cands2, covered and covered2,
     )  # fmt: skip
 
 
@@ -1228,22 +1235,25 @@ def _speed(v: FloatArray) -> float:
 def _failsafe(x0, x, v, m, fx, surface, cands, p: SelfContactParameters):
     """Crossing check over the step and impact zones until none is left (or the passes are
     used up): positions, velocities, crossings of the first and last pass, zone nodes, the
-    candidate list (rebuilt if a correction made it invalid)."""
+    candidate list (rebuilt if a correction made it invalid), whether the lists covered
+    the step."""
     eps = p.eps * p.distance
     found, links, zone = -1, np.zeros((0, 4), dtype=np.intp), np.zeros(0, dtype=np.intp)
+    covered = True
     for _ in range(p.failsafe_passes):
-        cands, _ = _list_for(cands, x, x0, surface, p, both=False)
+        cands, _, ok = _list_for(cands, x, x0, surface, p, both=False)
+        covered &= ok
         pt, ee = _crossings(cands, surface, x0, x, eps)
         count = len(pt) + len(ee)
         found = count if found < 0 else found
         if count == 0:
-            return x, v, found, 0, len(zone), cands
+            return x, v, found, 0, len(zone), cands, covered
         links = np.concatenate([links, pt, ee])
         x, v = x.copy(), v.copy()
         zone = _impact_zones(x0, x, v, m, fx, links)
-    cands, _ = _list_for(cands, x, x0, surface, p, both=False)
+    cands, _, ok = _list_for(cands, x, x0, surface, p, both=False)
     pt, ee = _crossings(cands, surface, x0, x, eps)
-    return x, v, found, len(pt) + len(ee), len(zone), cands
+    return x, v, found, len(pt) + len(ee), len(zone), cands, covered & ok
 
 
 # --------------------------------------------------------------------------- explicit runner
@@ -1262,6 +1272,7 @@ class SelfContactRecord:
     crossings_left: int  # crossing pairs left after the fail-safe in the window
     zone_nodes: int  # nodes moved in impact zones in the window
     rebuilds: int  # candidate-list rebuilds in the window
+    uncovered: int  # steps whose motion the capped candidate list did not cover
     wall: float  # seconds spent in the self-contact correction in the window
 
 
@@ -1396,7 +1407,7 @@ class SelfContact:
     def _empty_window() -> dict:
         return {
             "steps": 0, "contacts": 0, "deficit": 0.0, "gap": np.inf, "jn": 0.0, "found": 0,
-            "left": 0, "zone": 0, "rebuilds": 0, "wall": 0.0,
+            "left": 0, "zone": 0, "rebuilds": 0, "wall": 0.0, "uncovered": 0,
         }  # fmt: skip
 
     def _record(self, res: SelfContactResult, t: float, wall: float) -> None:
@@ -1409,6 +1420,7 @@ class SelfContact:
         w["left"] += res.crossings_left
         w["zone"] += res.zone_nodes
         w["rebuilds"] += int(res.rebuilt)
+        w["uncovered"] += int(not res.covered)
         w["wall"] += wall
         w["contacts"] = len(res.jn)
         self.time = t
@@ -1431,6 +1443,7 @@ class SelfContact:
             crossings_left=w["left"],
             zone_nodes=w["zone"],
             rebuilds=w["rebuilds"],
+            uncovered=w["uncovered"],
             wall=w["wall"],
         )
         self.history.append(rec)

@@ -58,7 +58,7 @@ def test_pressed_sheets_stay_apart_and_conserve_momentum():
         chk = check_surface(r.x, surf.triangles, radius=4 * D)
         assert chk.intersections == 0
         assert chk.min_distance >= 0.95 * D
-        assert r.crossings_left == 0
+        assert r.crossings_left == 0 and r.covered
         touched += len(r.jn) > 0
         x, v = r.x, r.v
     assert touched > 10
