@@ -1048,6 +1048,7 @@ def _run_explicit(
     acceleration, step size) every ``output.checkpoint_every`` rows. Without a body (a free
     drape) no contact is built and the contact columns are 0."""
     from .contact.film import FilmContact, FilmParameters
+    from .contact.self_contact import SelfContact
     from .dynamics import (
         DynamicsDivergence,
         ShellSystem,
@@ -1105,6 +1106,9 @@ def _run_explicit(
     if scene["body"]:
         params = FilmParameters(mu=c["mu"], kernel=c["kernel"])
         fc = FilmContact(system, bodies_at, params=params)
+    # fabric self-contact (contact.self_contact): FILM, then the self-contact correction
+    sc = SelfContact.from_scene(system, c, film=fc) if scene["body"] else None
+    rank0_print(f"  self-contact: {'built' if sc is not None else 'not built'}")
     if resume:
         if fc is not None:
             fc.dissipation_total = float(data["contact_dissipation"])
@@ -1281,7 +1285,7 @@ def _run_explicit(
                 load=load,
                 on_step=on_step,
                 stable=st,
-                contact=fc,
+                contact=fc if sc is None else sc,
                 safety=sv["safety"],
                 recheck_every=sv["recheck_every"],
                 clock=start["clock"],
