@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from _taylor import energy_orders, jacobian_orders, random_state
 from mpi4py import MPI
 
 from clothfem import mesh as meshes
@@ -135,17 +136,6 @@ def _material(decrimping: bool):
     )
 
 
-def _random_state(model, scale, seed):
-    rng = np.random.default_rng(seed + COMM.rank)
-    x = model.create_vector()
-    x.setArray(rng.normal(size=x.getLocalSize()) * scale)
-    return x
-
-
-def _orders(errors):
-    return [math.log2(errors[i] / errors[i + 1]) for i in range(len(errors) - 1)]
-
-
 @pytest.fixture(scope="module", params=[False, True], ids=["linear", "decrimping"])
 def panel_model(request):
     """A curved panel with yarn friction whose history was committed at a random state."""
@@ -153,7 +143,7 @@ def panel_model(request):
         COMM, radius=1.0, length=1.5, angle=math.radians(50), n_around=4, n_along=3
     )
     model = ShellModel(sm, material=_material(request.param), thickness=0.01, warp=(1.0, 0.3, 0.0))
-    model.set_state(_random_state(model, 0.05, 7))
+    model.set_state(random_state(model, 0.05, 7))
     model.friction.commit()
     assert model.friction.stored() > 0
     return model
@@ -163,41 +153,18 @@ def test_residual_is_energy_gradient_with_history(panel_model):
     """|Pi(x + h dx) - Pi(x) - h R . dx| = O(h^2) with a committed friction history."""
     model = panel_model
     model.set_load_factor(0.0)
-    x, dx = _random_state(model, 0.05, 2), _random_state(model, 1.0, 3)
+    x, dx = random_state(model, 0.05, 2), random_state(model, 1.0, 3)
 
-    def energy(v):
-        model.set_state(v)
-        return model.strain_energy()
-
-    f = x.duplicate()
-    model.residual(x, f)
-    slope = f.dot(dx)
-    e0 = energy(x)
-    errs = []
-    for h in (1e-4, 5e-5, 2.5e-5, 1.25e-5):
-        xh = x.copy()
-        xh.axpy(h, dx)
-        errs.append(abs(energy(xh) - e0 - h * slope))
-    assert min(_orders(errs)) > 1.9
+    steps = (1e-4, 5e-5, 2.5e-5, 1.25e-5)
+    assert min(energy_orders(model, x, dx, steps, model.strain_energy)) > 1.9
 
 
 def test_jacobian_taylor_with_history(panel_model):
     """|R(x + h dx) - R(x) - h K dx| = O(h^2) with a committed friction history."""
     model = panel_model
     model.set_load_factor(0.0)
-    x, dx = _random_state(model, 0.05, 0), _random_state(model, 1.0, 1)
-    f0 = x.duplicate()
-    model.residual(x, f0)
-    Kdx = x.duplicate()
-    model.jacobian(x).mult(dx, Kdx)
-    errs = []
-    for h in (1e-4, 5e-5, 2.5e-5, 1.25e-5):
-        xh = x.copy()
-        xh.axpy(h, dx)
-        fh = x.duplicate()
-        model.residual(xh, fh)
-        errs.append((fh - f0 - h * Kdx).norm())
-    assert min(_orders(errs)) > 1.9
+    x, dx = random_state(model, 0.05, 0), random_state(model, 1.0, 1)
+    assert min(jacobian_orders(model, x, dx, (1e-4, 5e-5, 2.5e-5, 1.25e-5))) > 1.9
 
 
 def test_checkpoint_arrays_restore_the_history(panel_model):
@@ -206,14 +173,14 @@ def test_checkpoint_arrays_restore_the_history(panel_model):
     model = panel_model
     model.set_load_factor(0.0)
     saved = model.friction.state_arrays()
-    x = _random_state(model, 0.05, 11)
+    x = random_state(model, 0.05, 11)
     f0, f1 = x.duplicate(), x.duplicate()
     model.residual(x, f0)
     totals = (model.friction.dissipated(), model.friction.stored())
     model.set_state(x)
     model.friction.commit()
     model.friction.restore_arrays(saved)
-    model.residual(_random_state(model, 0.05, 12), f1)  # (the model caches R by state)
+    model.residual(random_state(model, 0.05, 12), f1)  # (the model caches R by state)
     model.residual(x, f1)
     assert (f1 - f0).norm() == 0.0
     assert (model.friction.dissipated(), model.friction.stored()) == totals
