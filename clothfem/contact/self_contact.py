@@ -944,6 +944,21 @@ def _unit_roots(c: FloatArray, iterations: int = 45) -> FloatArray:
     return out
 
 
+def _coplanar_positions(x0: FloatArray, x1: FloatArray, P: list[IntArray]):
+    """For each of the up to three times in [0, 1] at which the four nodes ``P[k][i]``
+    (moving on straight paths from ``x0`` to ``x1``) are coplanar: the rows ``s`` that have
+    such a time and the four nodes' positions then (a list of four (len(s), 3) arrays)."""
+    d = [x1[i] - x0[i] for i in P]
+    co = _cubic(
+        x0[P[1]] - x0[P[0]], d[1] - d[0], x0[P[2]] - x0[P[0]], d[2] - d[0],
+        x0[P[3]] - x0[P[0]], d[3] - d[0],
+    )  # fmt: skip
+    for tt in _unit_roots(co).T:
+        s = np.flatnonzero(np.isfinite(tt))
+        if s.size:
+            yield s, [x0[i[s]] + tt[s, None] * dk[s] for i, dk in zip(P, d, strict=True)]
+
+
 def point_triangle_crossings(
     x0: FloatArray,
     x1: FloatArray,
@@ -955,18 +970,8 @@ def point_triangle_crossings(
     """Whether node ``node[i]`` comes within ``eps`` [m] of triangle ``tri[i]`` at a time its
     point is coplanar with the triangle, along the straight paths from ``x0`` to ``x1``."""
     t = surface.triangles[tri]
-    P = [node, t[:, 0], t[:, 1], t[:, 2]]
-    d = [x1[i] - x0[i] for i in P]
-    co = _cubic(
-        x0[P[1]] - x0[P[0]], d[1] - d[0], x0[P[2]] - x0[P[0]], d[2] - d[0],
-        x0[P[3]] - x0[P[0]], d[3] - d[0],
-    )  # fmt: skip
     hit = np.zeros(len(node), dtype=bool)
-    for tt in _unit_roots(co).T:
-        s = np.flatnonzero(np.isfinite(tt))
-        if s.size == 0:
-            continue
-        pos = [x0[i[s]] + tt[s, None] * dk[s] for i, dk in zip(P, d, strict=True)]
+    for s, pos in _coplanar_positions(x0, x1, [node, t[:, 0], t[:, 1], t[:, 2]]):
         q, _ = closest_point_triangle(*pos)
         hit[s] |= np.linalg.norm(pos[0] - q, axis=1) <= eps
     return hit
@@ -978,18 +983,8 @@ def edge_edge_crossings(
     """Whether edge pairs ``ee`` (M, 2) come within ``eps`` [m] of each other at a time their
     four nodes are coplanar, along the straight paths from ``x0`` to ``x1``."""
     e0, e1 = surface.edges[ee[:, 0]], surface.edges[ee[:, 1]]
-    P = [e0[:, 0], e0[:, 1], e1[:, 0], e1[:, 1]]
-    d = [x1[i] - x0[i] for i in P]
-    co = _cubic(
-        x0[P[1]] - x0[P[0]], d[1] - d[0], x0[P[2]] - x0[P[0]], d[2] - d[0],
-        x0[P[3]] - x0[P[0]], d[3] - d[0],
-    )  # fmt: skip
     hit = np.zeros(len(ee), dtype=bool)
-    for tt in _unit_roots(co).T:
-        s = np.flatnonzero(np.isfinite(tt))
-        if s.size == 0:
-            continue
-        pos = [x0[i[s]] + tt[s, None] * dk[s] for i, dk in zip(P, d, strict=True)]
+    for s, pos in _coplanar_positions(x0, x1, [e0[:, 0], e0[:, 1], e1[:, 0], e1[:, 1]]):
         hit[s] |= segment_distance(*pos) <= eps
     return hit
 
