@@ -34,6 +34,7 @@ from .petsc_options import describe_direct_lu
 from .scene import DECRIMPING_KEYS, SceneError
 from .shell import (
     Clamp,
+    DahlFriction,
     DecrimpingFabric,
     EdgeMoment,
     EdgeTraction,
@@ -279,6 +280,13 @@ def _loads(scene):
 def build_material(mat: dict[str, Any]) -> FabricMaterial:
     """The material of a validated scene's ``[material]`` table."""
     common = dict(E1=mat["E1"], E2=mat["E2"], G12=mat["G12"], nu12=mat["nu12"], rho=mat["rho"])
+    if mat["friction_stiffness1"] is not None:  # all four (scene validation)
+        common["friction"] = DahlFriction(
+            stiffness1=mat["friction_stiffness1"],
+            stiffness2=mat["friction_stiffness2"],
+            stress1=mat["friction_stress1"],
+            stress2=mat["friction_stress2"],
+        )
     if mat["law"] == "decrimping":
         return DecrimpingFabric(**common, **{k: mat[k] for k in DECRIMPING_KEYS})
     return FabricMaterial(**common)
@@ -295,6 +303,12 @@ def _material_line(mat: dict[str, Any]) -> str:
             f"E2 {mat['E2_decrimped']:.4g} Pa above yarn strains "
             f"{mat['transition1'] + mat['width1']:.4g} / {mat['transition2'] + mat['width2']:.4g}"
             " (the explicit stable step shrinks as the yarns de-crimp: solver.recheck_every)"
+        )
+    if mat["friction_stiffness1"] is not None:
+        line += (
+            f"; yarn friction (Dahl) k {mat['friction_stiffness1']:.4g} / "
+            f"{mat['friction_stiffness2']:.4g} Pa, S {mat['friction_stress1']:.4g} / "
+            f"{mat['friction_stress2']:.4g} Pa"
         )
     return line
 

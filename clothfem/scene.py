@@ -103,6 +103,16 @@ MATERIALS = {
     ),
 }
 DECRIMPING_KEYS = ("E1_decrimped", "E2_decrimped", "transition1", "transition2", "width1", "width2")
+FRICTION_KEYS = (
+    "friction_stiffness1",
+    "friction_stiffness2",
+    "friction_stress1",
+    "friction_stress2",
+)
+# yarn friction (Dahl) of clothfem.shell.hysteresis.COTTON_FRICTION: illustrative, not fitted
+_COTTON_FRICTION = dict(zip(FRICTION_KEYS, (1.2e6, 1.2e6, 3.0e4, 3.0e4), strict=True))
+MATERIALS["crimped-cotton-hysteretic"] = {**MATERIALS["crimped-cotton"], **_COTTON_FRICTION}
+MATERIALS["decrimping-cotton-hysteretic"] = {**MATERIALS["decrimping-cotton"], **_COTTON_FRICTION}
 
 SCHEMA: dict[str, Section] = {
     "scene": Section(
@@ -177,6 +187,22 @@ SCHEMA: dict[str, Section] = {
             ),
             "width1": Key("float", "decrimping: warp transition half-width, <= transition1", **POS),
             "width2": Key("float", "decrimping: weft transition half-width, <= transition2", **POS),
+            "friction_stiffness1": Key(
+                "float", "yarn friction (Dahl): warp sticking stiffness k1 [Pa]", **POS
+            ),
+            "friction_stiffness2": Key(
+                "float", "yarn friction (Dahl): weft sticking stiffness k2 [Pa]", **POS
+            ),
+            "friction_stress1": Key(
+                "float",
+                "yarn friction (Dahl): warp sliding stress S1 [Pa] (loop half-height)",
+                **POS,
+            ),
+            "friction_stress2": Key(
+                "float",
+                "yarn friction (Dahl): weft sliding stress S2 [Pa] (loop half-height)",
+                **POS,
+            ),
             "thickness": Key("float", "fabric thickness [m]", required=True, **POS),
             "warp": Key(
                 "vec3", "global direction projected on the surface as warp", default=[1.0, 0.0, 0.0]
@@ -669,6 +695,13 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
     if not abs(mat["nu12"]) < limit:
         _fail("material.nu12", f"must be in (-{limit:.4g}, {limit:.4g}), got {mat['nu12']!r}")
     _validate_decrimping(data["material"], mat)
+    given = [k for k in FRICTION_KEYS if mat[k] is not None]
+    if given and len(given) < len(FRICTION_KEYS):
+        missing = next(k for k in FRICTION_KEYS if mat[k] is None)
+        _fail(
+            f"material.{missing}",
+            "required with the other material.friction_* keys (all four or none)",
+        )
     if out["mesh"]["generator"] == "cylinder" and out["mesh"]["n_around"] % 4:
         _fail(
             "mesh.n_around",

@@ -27,7 +27,8 @@ tau_seg the torque of the contact forces on that segment about its joint
 (:func:`clothfem.report.joint_work`: trapezoid over the hinge angle of the quasi-static
 increments and of the Newmark steps, one impulse per explicit step);
 ``dissipation_total`` [J] is the contact layers' frictional dissipation and
-``dissipation_material`` [J] the fabric's (0: the St. Venant-Kirchhoff fabric is elastic).
+``dissipation_material`` [J] the fabric's (yarn friction, ``material.friction_*``; 0 for an
+elastic fabric).
 The explicit rows also carry ``external_work`` (the work of gravity [J]) for the energy
 balance. :func:`clothfem.run.run_scene` adds the per-phase torque statistics to
 ``summary.json`` (:func:`clothfem.report.resistance_measures`).
@@ -512,6 +513,7 @@ def run_contact_scene(
     stage_wall = {"t": time.perf_counter()}
 
     def on_sub(rec) -> None:
+        model.commit_material()  # a converged sub-step: yarn-friction history to it
         if stab is not None:  # force at the converged sub-step, then move the anchor
             stab.last = stab.force(comm)
             stab.commit()
@@ -545,7 +547,7 @@ def run_contact_scene(
                 "newton_iterations": sum(r.newton_iterations for r in recs),
                 "joint_work": joint_work_at(stage, t),
                 "dissipation_total": contact.dissipation_total,
-                "dissipation_material": 0.0,
+                "dissipation_material": model.dissipated_material(),
                 "stabilization_force": stab.last if stab is not None else 0.0,
                 "wall_time": now - stage_wall["t"],
                 "elapsed": now - t0,
@@ -590,7 +592,9 @@ def run_contact_scene(
                         ) from None
                     write_row("settle", s, 0.0, recs)
             else:
-                write_row("settle", 0, 0.0, [contact.solve_step(1.0)])
+                rec = contact.solve_step(1.0)
+                model.commit_material()
+                write_row("settle", 0, 0.0, [rec])
             snapshot("settled")
             quarter = max(1, increments // 4)
             for inc in range(1, (increments if hinge_ids else 0) + 1):  # no hinge: settle only
@@ -903,6 +907,7 @@ def _run_dynamic(
     with ResultWriter(out, model, keep_rows=keep, resume_after=resume_after) as writer:
 
         def on_step(r) -> None:
+            model.commit_material()  # the step is accepted: yarn-friction history to x_n+1
             state["step"] += 1
             state["cut"] += r.cutbacks
             cr = r.contact
@@ -957,7 +962,7 @@ def _run_dynamic(
                 "strain_energy": r.strain_energy,
                 "joint_work": state["work"],
                 "dissipation_total": contact.dissipation_total,
-                "dissipation_material": 0.0,
+                "dissipation_material": model.dissipated_material(),
                 "t_assembly": tm["assembly"],
                 "t_contact": tm["contact"],
                 "t_solve": tm["solve"],
@@ -1193,6 +1198,7 @@ def _run_explicit(
             )
 
         def on_step(r) -> None:
+            model.commit_material()  # the step is accepted: yarn-friction history to x_n+1
             tau_local, res_local, power = local_torque_and_resultant(r.time)
             acc["tau"] += tau_local
             acc["res"] += res_local
@@ -1239,7 +1245,7 @@ def _run_explicit(
                 "external_work": r.external_work,
                 "joint_work": state["work"],
                 "dissipation_total": fc.dissipation_total if fc is not None else 0.0,
-                "dissipation_material": 0.0,
+                "dissipation_material": model.dissipated_material(),
                 "t_contact": fc.wall - state["contact_wall"] if fc is not None else 0.0,
                 "t_io": t_io,
                 "wall_time": now - state["t_row"],

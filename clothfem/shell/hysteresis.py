@@ -169,11 +169,19 @@ class YarnFriction:
         self.last_min_dissipation = 0.0
 
     def commit(self) -> float:
-        """Advance the history to the model's current state; returns the energy [J]
-        dissipated in the step (collective). ``last_min_dissipation`` keeps the smallest
-        dissipation density [J/m^3] of a point in the step (>= 0 up to round-off)."""
-        par = self.friction.parameters()
+        """Advance the history to the model's current state (:meth:`advance`); returns the
+        energy [J] dissipated in the step (collective). ``last_min_dissipation`` keeps the
+        smallest dissipation density [J/m^3] of a point in the step (>= 0 up to round-off)."""
         before = self.dissipated()
+        lowest = self.advance()
+        self.last_min_dissipation = self.mesh.comm.allreduce(lowest, op=MPI.MIN)
+        return self.dissipated() - before
+
+    def advance(self) -> float:
+        """Advance the history to the model's current state without any collective call
+        (an explicit run does this every step and measures :meth:`dissipated` per history
+        row); returns this rank's smallest dissipation density [J/m^3] of the step."""
+        par = self.friction.parameters()
         lowest = math.inf
         imap = self.mesh.topology.index_map(2)
         n_cells = imap.size_local + imap.num_ghosts
@@ -191,8 +199,7 @@ class YarnFriction:
             D.x.array[dofs] += diss
             if diss.size:
                 lowest = min(lowest, float(diss.min()))
-        self.last_min_dissipation = self.mesh.comm.allreduce(lowest, op=MPI.MIN)
-        return self.dissipated() - before
+        return lowest
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         """The history and the cumulated dissipation (local arrays, for a checkpoint)."""

@@ -568,14 +568,30 @@ class ShellModel:
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         """The rank-local state to checkpoint: u, theta (owned + ghost), the nodal fibre bases
-        (changed by :meth:`rebase`) and the load factor. Restore with :meth:`restore_arrays`
-        on the same mesh and number of ranks."""
-        return {
+        (changed by :meth:`rebase`), the load factor and, with yarn friction, its history.
+        Restore with :meth:`restore_arrays` on the same mesh and number of ranks."""
+        data = {
             "u": self.u.x.array.copy(),
             "theta": self.theta.x.array.copy(),
             "basis": self.basis.copy(),
             "load_factor": np.array(float(self.lam.value)),
         }
+        if self.friction is not None:
+            data.update(self.friction.state_arrays())
+        return data
+
+    def commit_material(self) -> None:
+        """Advance the material history (yarn friction) to the current state; nothing for an
+        elastic material. Call it once after every accepted step or load increment; no
+        collective call (measure with ``friction.dissipated()``)."""
+        if self.friction is not None:
+            self.friction.advance()
+            self._Rw_at = None  # the residual's history changed
+
+    def dissipated_material(self) -> float:
+        """Energy [J] dissipated by the material since the start (yarn friction; 0 for an
+        elastic material; collective)."""
+        return 0.0 if self.friction is None else self.friction.dissipated()
 
     def restore_arrays(self, data: dict[str, np.ndarray]) -> None:
         """Inverse of :meth:`state_arrays` (collective: updates the directors)."""
@@ -587,6 +603,10 @@ class ShellModel:
                 )
             arr[:] = data[key]
         self.basis[:] = data["basis"]
+        if self.friction is not None:
+            if "friction_history" not in data:
+                raise ValueError("checkpoint has no yarn-friction history; the model has one")
+            self.friction.restore_arrays(data)
         for k, E in enumerate(self._fibre_e):
             E.x.array.reshape(-1, 3)[:] = self.basis[:, k]
         self._f_ext_lam = None

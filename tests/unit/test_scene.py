@@ -76,6 +76,14 @@ def test_defaults_filled():
             r"'contact.newton_stall_limit': must be an integer in \[1, inf\]",
         ),
         (_with("contact.kernel", "cuda"), "'contact.kernel': must be one of 'compiled', 'numpy'"),
+        (
+            _with("material.friction_stiffness1", 1e6),
+            "'material.friction_stiffness2': required with the other material.friction_",
+        ),
+        (
+            _with("material.friction_stress2", -1.0),
+            r"'material.friction_stress2': must be a number in \(0, inf\]",
+        ),
     ],
 )
 def test_bad_scenes_one_line_errors(data, message):
@@ -91,6 +99,16 @@ def test_overrides_and_preset():
     assert s["material"]["G12"] == 7.2e9 / 200 and s["material"]["rho"] == 700.0
     with pytest.raises(scenes.SceneError, match="expected key.path=value"):
         scenes.apply_overrides(MINIMAL, ["mesh.nx"])
+
+
+def test_hysteretic_preset_builds_yarn_friction():
+    from clothfem.run import build_material
+    from clothfem.shell.hysteresis import COTTON_FRICTION
+
+    data = dict(MINIMAL, material={"preset": "decrimping-cotton-hysteretic", "thickness": 1e-3})
+    mat = build_material(scenes.validate(data)["material"])
+    assert mat.friction == COTTON_FRICTION and mat.E1_decrimped == 350e6
+    assert build_material(scenes.validate(MINIMAL)["material"]).friction is None
 
 
 def test_docs_match_schema():

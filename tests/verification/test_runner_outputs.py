@@ -214,8 +214,13 @@ def _same_history(a: list[dict[str, str]], b: list[dict[str, str]]) -> None:
 
 @pytest.mark.parametrize(
     ("sets", "picks"),
-    [(EXPLICIT, (5, 17)), ([*NEWMARK, "body.1.angle_max=1.5"], (4, 11))],
-    ids=["explicit", "newmark"],
+    [
+        (EXPLICIT, (5, 17)),
+        ([*EXPLICIT, "material.preset=crimped-cotton-hysteretic"], (5, 17)),
+        ([*NEWMARK, "body.1.angle_max=1.5"], (4, 11)),
+        ([*NEWMARK, "body.1.angle_max=1.5", "material.preset=crimped-cotton-hysteretic"], (4, 11)),
+    ],
+    ids=["explicit", "explicit-yarn-friction", "newmark", "newmark-yarn-friction"],
 )
 def test_resume_bit_for_bit_from_two_checkpoints(tmp_path, sets, picks):
     """A short run of the CI scene checkpointing every row (explicit) / step (Newmark),
@@ -228,6 +233,8 @@ def test_resume_bit_for_bit_from_two_checkpoints(tmp_path, sets, picks):
     scene = scenes.load(CI, sets)
     kept = _run_keeping_checkpoints(scene, base / "reference", picks)
     reference = _rows(base / "reference")
+    if any("hysteretic" in s for s in sets):  # the friction history is part of the state
+        assert float(reference[-1]["dissipation_material"]) > 0.0
     t_ref, f_ref = _series(base / "reference")
     if COMM.size == 1 and "newmark" in sets[0]:
         with np.load(kept[picks[1]] / "rank0-of-1.npz") as z:
