@@ -29,7 +29,11 @@ Studies (``--study``, default all):
   7.2 GPa, rho = 436 / 436 / 700; G12 = E/200 for all three, as the paper states, so set I
   is softer in shear than the scene's crimped-cotton preset, G = 0.1 MPa) ->
   ``material.png`` (log y);
-  ``torque_per_E_at_<a>deg`` = torque / E1 [N m / Pa].
+  ``torque_per_E_at_<a>deg`` = torque / E1 [N m / Pa];
+* ``law``: the fabric law at mu = 0.1 and 0.5: linear crimped cotton (``crimped-cotton``),
+  the decrimping law (``decrimping-cotton``: 1.2 MPa stiffening to 350 MPa) and the same
+  with yarn friction (``decrimping-cotton-hysteretic``) -> ``law_mu0.1.png``,
+  ``law_mu0.5.png``; ``torque_vs_linear_at_<a>deg`` = torque / the linear case's (same mu).
 
 A case whose physics a completed case of another study already ran (same scene after
 overrides and defaults, but for its name and output sections; e.g. friction's mu = 0.5, fit's
@@ -96,7 +100,8 @@ from _arm_common import (  # noqa: E402
     torque_plot,
 )
 
-STUDIES = ("mesh", "friction", "fit", "thickness", "material")
+STUDIES = ("mesh", "friction", "fit", "thickness", "material", "law")
+LAWS = ("crimped-cotton", "decrimping-cotton", "decrimping-cotton-hysteretic")
 MESHES = [(8, 10), (12, 16), (16, 20), (24, 30)]
 QUICK_MESHES = [(8, 10), (12, 16)]
 RATIO_ANGLES = (10, 20, 30, 40, 50)
@@ -164,6 +169,16 @@ def study_cases(study: str, args: argparse.Namespace) -> list[Case]:
             )
             for name, m in MATERIALS.items()
         ]
+    if study == "law":
+        return [
+            Case(
+                f"{law}_mu{mu:g}",
+                [f"material.preset={law}", f"contact.mu={mu:g}"],
+                {"law": law, "mu": mu},
+            )
+            for mu in (0.1, 0.5)
+            for law in LAWS
+        ]
     raise ValueError(study)
 
 
@@ -173,11 +188,13 @@ PARAMS = {
     "fit": ["n_around", "n_along", "radius_m", "mu", "integrator"],
     "thickness": ["n_around", "n_along", "thickness_m", "mu", "integrator"],
     "material": ["n_around", "n_along", "set", "E_Pa", "G12_Pa", "rho", "mu", "integrator"],
+    "law": ["n_around", "n_along", "law", "mu", "integrator"],
 }
 EXTRA = {
     "mesh": ["err_vs_finest", "err_smooth_vs_finest", "err_lo_deg", "err_hi_deg", "finest"],
     "thickness": [f"ratio_at_{a}deg" for a in RATIO_ANGLES],
     "material": [f"torque_per_E_at_{a}deg" for a in (*RATIO_ANGLES, 57)],
+    "law": [f"torque_vs_linear_at_{a}deg" for a in (*RATIO_ANGLES, 57)],
 }
 
 
@@ -274,6 +291,13 @@ def post_process(study: str, rows: list[dict], study_dir: Path) -> None:
         for r in rows:
             for a in (*RATIO_ANGLES, 57):
                 r[f"torque_per_E_at_{a}deg"] = r[f"torque_at_{a}deg"] / r["E_Pa"]
+    elif study == "law":
+        for r in rows:
+            base = by_name.get(f"{LAWS[0]}_mu{r['mu']:g}")
+            for a in (*RATIO_ANGLES, 57):
+                num, den = r[f"torque_at_{a}deg"], base[f"torque_at_{a}deg"] if base else math.nan
+                ok = den and math.isfinite(den)
+                r[f"torque_vs_linear_at_{a}deg"] = num / den if ok else math.nan
 
 
 def plots(study: str, cases: list[Case], study_dir: Path, out: Path, title_mesh: str) -> None:
@@ -287,6 +311,15 @@ def plots(study: str, cases: list[Case], study_dir: Path, out: Path, title_mesh:
                 [(f"{c.params['n_around']}x{c.params['n_along']}", folder(c)) for c in sel],
                 out / f"mesh_mu{mu:g}.png",
                 title=f"arm-sleeve: mesh study, mu = {mu:g}, {title_mesh.split(', ')[-1]}",
+            )
+        return
+    if study == "law":
+        for mu in (0.1, 0.5):
+            sel = [c for c in cases if c.params["mu"] == mu]
+            torque_plot(
+                [(c.params["law"], folder(c)) for c in sel],
+                out / f"law_mu{mu:g}.png",
+                title=f"arm-sleeve: fabric law, mu = {mu:g}, {title_mesh}",
             )
         return
     labels = {

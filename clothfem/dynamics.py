@@ -348,6 +348,10 @@ class ShellSystem:
     def set_load(self, lam: float) -> None:
         self.model.set_load_factor(lam)
 
+    def set_time_step(self, dt: float) -> None:
+        """The size [s] of the step about to be taken (rate-dependent material terms)."""
+        self.model.set_time_step(dt)
+
     def bc(self, lam: float) -> tuple[np.ndarray, np.ndarray]:
         return self.model.bc_rows_and_values(lam)
 
@@ -532,6 +536,9 @@ class LinearSystem:
 
     def set_load(self, lam: float) -> None:
         self._lam = float(lam)
+
+    def set_time_step(self, dt: float) -> None:
+        """Nothing: the linear system has no rate-dependent terms."""
 
     def bc(self, lam: float) -> tuple[np.ndarray, np.ndarray]:
         if self._bc is None:
@@ -943,6 +950,7 @@ def integrate_implicit(
             lam1 = lam_of(t + h_try)
             lam_a = (1 - af) * lam1 + af * lam_n
             st.fscale = energy.fscale
+            s.set_time_step(h_try)
             ok, its, r0, r1 = st.solve(h_try, lam_a, lam1)
             if ok:
                 break
@@ -1379,6 +1387,7 @@ def integrate_explicit(
         if len(rows):
             xa = x.getArray()
             xa[rows] = values
+        s.set_time_step(h)
         if contact is not None:
             # FILM on the predictor; the corrected nodes' half-step velocity becomes the
             # post-impact one. Correcting the full-step velocity instead (v_n + h a_n) made the

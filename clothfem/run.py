@@ -39,6 +39,7 @@ from .shell import (
     EdgeMoment,
     EdgeTraction,
     FabricMaterial,
+    FabricViscosity,
     Gravity,
     Pin,
     PointForce,
@@ -287,6 +288,10 @@ def build_material(mat: dict[str, Any]) -> FabricMaterial:
             stress1=mat["friction_stress1"],
             stress2=mat["friction_stress2"],
         )
+    if mat["viscosity1"] is not None:  # all three (scene validation)
+        common["viscosity"] = FabricViscosity(
+            eta1=mat["viscosity1"], eta2=mat["viscosity2"], eta12=mat["viscosity12"]
+        )
     if mat["law"] == "decrimping":
         return DecrimpingFabric(**common, **{k: mat[k] for k in DECRIMPING_KEYS})
     return FabricMaterial(**common)
@@ -303,6 +308,11 @@ def _material_line(mat: dict[str, Any]) -> str:
             f"E2 {mat['E2_decrimped']:.4g} Pa above yarn strains "
             f"{mat['transition1'] + mat['width1']:.4g} / {mat['transition2'] + mat['width2']:.4g}"
             " (the explicit stable step shrinks as the yarns de-crimp: solver.recheck_every)"
+        )
+    if mat["viscosity1"] is not None:
+        line += (
+            f"; membrane viscosity {mat['viscosity1']:.4g} / {mat['viscosity2']:.4g} / "
+            f"{mat['viscosity12']:.4g} Pa s"
         )
     if mat["friction_stiffness1"] is not None:
         line += (

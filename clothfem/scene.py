@@ -103,6 +103,7 @@ MATERIALS = {
     ),
 }
 DECRIMPING_KEYS = ("E1_decrimped", "E2_decrimped", "transition1", "transition2", "width1", "width2")
+VISCOSITY_KEYS = ("viscosity1", "viscosity2", "viscosity12")
 FRICTION_KEYS = (
     "friction_stiffness1",
     "friction_stiffness2",
@@ -202,6 +203,18 @@ SCHEMA: dict[str, Section] = {
                 "float",
                 "yarn friction (Dahl): weft sliding stress S2 [Pa] (loop half-height)",
                 **POS,
+            ),
+            "viscosity1": Key(
+                "float", "membrane viscosity (Kelvin-Voigt) on the warp strain rate [Pa s]", lo=0.0
+            ),
+            "viscosity2": Key(
+                "float", "membrane viscosity (Kelvin-Voigt) on the weft strain rate [Pa s]", lo=0.0
+            ),
+            "viscosity12": Key(
+                "float",
+                "membrane viscosity (Kelvin-Voigt) on the shear strain rate [Pa s] "
+                "(newmark, explicit; no effect in a static run)",
+                lo=0.0,
             ),
             "thickness": Key("float", "fabric thickness [m]", required=True, **POS),
             "warp": Key(
@@ -695,6 +708,15 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
     if not abs(mat["nu12"]) < limit:
         _fail("material.nu12", f"must be in (-{limit:.4g}, {limit:.4g}), got {mat['nu12']!r}")
     _validate_decrimping(data["material"], mat)
+    given = [k for k in VISCOSITY_KEYS if mat[k] is not None]
+    if given and len(given) < len(VISCOSITY_KEYS):
+        missing = next(k for k in VISCOSITY_KEYS if mat[k] is None)
+        _fail(
+            f"material.{missing}",
+            "required with the other material.viscosity* keys (all three or none)",
+        )
+    if given and not any(mat[k] > 0 for k in VISCOSITY_KEYS):
+        _fail("material.viscosity1", "one of viscosity1, viscosity2, viscosity12 must be > 0 Pa s")
     given = [k for k in FRICTION_KEYS if mat[k] is not None]
     if given and len(given) < len(FRICTION_KEYS):
         missing = next(k for k in FRICTION_KEYS if mat[k] is None)

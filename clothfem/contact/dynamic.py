@@ -205,6 +205,7 @@ class DynamicContact:
         xt.axpy(dt, self.v)
         xt.axpy(dt * dt * (0.5 - b), self.a)
         self.view.set_step(xt, 1.0 / (b * dt * dt))
+        self.system.set_time_step(dt)
         self._set_poses(self.t + dt)
         try:
             rec = self.contact.solve_step(lam)

@@ -15,6 +15,7 @@ from .conditions import (
 from .hysteresis import DahlFriction
 from .material import DecrimpingFabric, FabricMaterial
 from .model import Quadrature, ShellModel
+from .viscosity import FabricViscosity
 
 __all__ = [
     "Clamp",
@@ -23,6 +24,7 @@ __all__ = [
     "EdgeMoment",
     "EdgeTraction",
     "FabricMaterial",
+    "FabricViscosity",
     "Gravity",
     "Pin",
     "PointForce",

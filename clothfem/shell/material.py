@@ -26,6 +26,7 @@ import numpy as np
 import ufl
 
 from .hysteresis import DahlFriction
+from .viscosity import FabricViscosity
 
 __all__ = [
     "FabricMaterial",
@@ -58,6 +59,8 @@ class FabricMaterial:
     shear_factor: transverse shear correction factor k [-], default 5/6.
     friction: yarn friction in parallel with the elastic law (load-unload hysteresis,
         :mod:`clothfem.shell.hysteresis`); None: elastic.
+    viscosity: membrane viscosity in parallel with the elastic law (Kelvin-Voigt,
+        :mod:`clothfem.shell.viscosity`); None: none.
     """
 
     E1: float
@@ -69,11 +72,16 @@ class FabricMaterial:
     G23: float | None = None
     shear_factor: float = 5.0 / 6.0
     friction: DahlFriction | None = None
+    viscosity: FabricViscosity | None = None
 
     def __post_init__(self) -> None:
         if self.friction is not None and not isinstance(self.friction, DahlFriction):
             raise ValueError(
                 f"material friction must be a DahlFriction or None, got {self.friction!r}"
+            )
+        if self.viscosity is not None and not isinstance(self.viscosity, FabricViscosity):
+            raise ValueError(
+                f"material viscosity must be a FabricViscosity or None, got {self.viscosity!r}"
             )
         for name in ("E1", "E2", "G12"):
             _check_positive(name, getattr(self, name), "Pa")

@@ -56,6 +56,7 @@ from .material import (
     membrane_energy,
     shear_energy,
 )
+from .viscosity import MembraneViscosity
 
 __all__ = ["ShellModel", "Quadrature"]
 
@@ -366,6 +367,12 @@ class ShellModel:
                 mesh, mat.friction, eps, self.t, degree=quadrature.reduced, dx=dx_r
             )
             membrane = membrane + self.friction.energy
+        self.viscosity = None
+        if mat.viscosity is not None:  # Kelvin-Voigt membrane, history at the same points
+            self.viscosity = MembraneViscosity(
+                mesh, mat.viscosity, eps, self.t, degree=quadrature.reduced, dx=dx_r
+            )
+            membrane = membrane + self.viscosity.energy
         self._energy_terms = {
             "membrane": membrane,
             "bending": bending_energy(kappa, self.Q, self.t) * dx_f,
@@ -576,22 +583,35 @@ class ShellModel:
             "basis": self.basis.copy(),
             "load_factor": np.array(float(self.lam.value)),
         }
-        if self.friction is not None:
-            data.update(self.friction.state_arrays())
+        for history in (self.friction, self.viscosity):
+            if history is not None:
+                data.update(history.state_arrays())
         return data
 
     def commit_material(self) -> None:
-        """Advance the material history (yarn friction) to the current state; nothing for an
-        elastic material. Call it once after every accepted step or load increment; no
-        collective call (measure with ``friction.dissipated()``)."""
-        if self.friction is not None:
-            self.friction.advance()
-            self._Rw_at = None  # the residual's history changed
+        """Advance the material history (yarn friction, membrane viscosity) to the current
+        state; nothing for an elastic material. Call it once after every accepted step or
+        load increment; no collective call (measure with :meth:`dissipated_material`)."""
+        for history in (self.friction, self.viscosity):
+            if history is not None:
+                history.advance()
+                self._Rw_at = None  # the residual's history changed
+
+    def set_time_step(self, dt: float) -> None:
+        """The size [s] of the step about to be taken (the membrane viscosity's rate
+        (E - E_n) / dt; nothing without viscosity). The integrators call it."""
+        if self.viscosity is not None and float(self.viscosity.inv_h.value) != 1.0 / dt:
+            self.viscosity.inv_h.value = 1.0 / dt
+            self._Rw_at = None  # the residual depends on the step
 
     def dissipated_material(self) -> float:
-        """Energy [J] dissipated by the material since the start (yarn friction; 0 for an
-        elastic material; collective)."""
-        return 0.0 if self.friction is None else self.friction.dissipated()
+        """Energy [J] dissipated by the material since the start (yarn friction and membrane
+        viscosity; 0 for an elastic material; collective)."""
+        total = 0.0
+        for history in (self.friction, self.viscosity):
+            if history is not None:
+                total += history.dissipated()
+        return total
 
     def restore_arrays(self, data: dict[str, np.ndarray]) -> None:
         """Inverse of :meth:`state_arrays` (collective: updates the directors)."""
@@ -603,10 +623,14 @@ class ShellModel:
                 )
             arr[:] = data[key]
         self.basis[:] = data["basis"]
-        if self.friction is not None:
-            if "friction_history" not in data:
-                raise ValueError("checkpoint has no yarn-friction history; the model has one")
-            self.friction.restore_arrays(data)
+        for history, key in (
+            (self.friction, "friction_history"),
+            (self.viscosity, "viscous_history"),
+        ):
+            if history is not None:
+                if key not in data:
+                    raise ValueError(f"checkpoint has no {key}; the model's material has one")
+                history.restore_arrays(data)
         for k, E in enumerate(self._fibre_e):
             E.x.array.reshape(-1, 3)[:] = self.basis[:, k]
         self._f_ext_lam = None

@@ -81,6 +81,10 @@ def test_defaults_filled():
             "'material.friction_stiffness2': required with the other material.friction_",
         ),
         (
+            _with("material.viscosity12", 40.0),
+            "'material.viscosity1': required with the other material.viscosity",
+        ),
+        (
             _with("material.friction_stress2", -1.0),
             r"'material.friction_stress2': must be a number in \(0, inf\]",
         ),

@@ -42,11 +42,19 @@ SETS = [
 ]
 
 
-@pytest.mark.parametrize("preset", ["crimped-cotton", "crimped-cotton-hysteretic"])
-def test_explicit_joint_work_balances_the_fabric_energy(tmp_path, preset):
+VISCOUS = ["material.viscosity1=20", "material.viscosity2=20", "material.viscosity12=40"]
+
+
+@pytest.mark.parametrize(
+    ("preset", "extra"),
+    [("crimped-cotton", []), ("crimped-cotton-hysteretic", []), ("crimped-cotton", VISCOUS)],
+    ids=["elastic", "yarn-friction", "viscous"],
+)
+def test_explicit_joint_work_balances_the_fabric_energy(tmp_path, preset, extra):
     out = Path(COMM.bcast(str(tmp_path) if COMM.rank == 0 else None, root=0)) / "arm"
     args = ["run", str(SCENE), "--out", str(out), "--set", f"material.preset={preset}"]
-    assert main([*args, *(a for s in SETS for a in ("--set", s))]) == 0
+    sets = [*SETS, *extra]
+    assert main([*args, *(a for s in sets for a in ("--set", s))]) == 0
     COMM.barrier()  # summary.json is written by rank 0 as the run returns
     h = read_history(out / "history.csv")
     k0 = int(np.flatnonzero(h["stage"] == "settle")[-1])
@@ -68,9 +76,9 @@ def test_explicit_joint_work_balances_the_fabric_energy(tmp_path, preset):
         f"material {material:.6g}, R {residual / w:+.3%}"
     )
     assert abs(residual) <= 0.03 * w, (w, fabric, friction, material, residual)
-    if preset == "crimped-cotton":
+    if preset == "crimped-cotton" and not extra:
         assert np.all(h["dissipation_material"] == 0.0)  # elastic fabric
-    else:  # yarn friction dissipates, never gives energy back
+    else:  # yarn friction and viscosity dissipate, never give energy back
         assert np.all(np.diff(h["dissipation_material"]) >= 0.0)
         assert material > 0.0
 

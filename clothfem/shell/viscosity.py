@@ -1,0 +1,161 @@
+"""Membrane viscosity: a Kelvin-Voigt (rate-dependent) part in parallel with the elastic law.
+
+Woven fabric dissipates energy when it deforms quickly (inter-fibre friction and the
+viscoelasticity of the fibres; Man & Swan 2007 name damping among the fabric characteristics
+the model should capture). Here the membrane carries, in parallel with the elastic law, the
+viscous stresses
+
+    tau_11 = eta1 dE11/dt,   tau_22 = eta2 dE22/dt,   tau_12 = eta12 d(2 E12)/dt,
+
+eta_i [Pa s] per yarn direction and eta12 for in-plane shear (engineering shear strain
+2 E12, the Green strains in the lamina frame). Over a step of size h from the committed
+strain E_n the rate is taken as (E - E_n) / h (backward Euler), the stress of the
+incremental potential
+
+    phi(E) = t / (2 h) [eta1 (E11 - E11,n)^2 + eta2 (E22 - E22,n)^2 + 4 eta12 (E12 - E12,n)^2],
+
+whose derivative the shell model adds to its residual (Jacobian by ``ufl.derivative``); the
+step dissipates 2 phi >= 0 (the viscous stress times the strain increment). The history
+E_n lives at the points of the reduced membrane rule and :meth:`MembraneViscosity.advance`
+moves it after every accepted step (``ShellModel.commit_material``). ``1/h`` is a constant
+the integrators set (``ShellModel.set_time_step``) before every step; it is 0 until then, so a
+quasi-static run has no viscous stress.
+
+The loss factor of a membrane mode of angular frequency omega is omega eta / E: viscous
+damping grows with frequency, so it damps the fabric's high membrane modes and leaves its slow
+motion (the body's) alone. In the explicit central difference it lowers the stable step of a
+mode with damping ratio xi = omega eta / (2 E) by the factor sqrt(1 + xi^2) - xi (the explicit
+runner applies it: ``explicit_step_factor``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import dolfinx
+import numpy as np
+import ufl
+from dolfinx import fem
+from mpi4py import MPI
+
+__all__ = ["FabricViscosity", "MembraneViscosity", "explicit_step_factor"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class FabricViscosity:
+    """Kelvin-Voigt viscosity of the membrane (1 = warp, 2 = weft, 12 = in-plane shear).
+
+    Attributes
+    ----------
+    eta1, eta2: viscosity on the yarn strain rates [Pa s] (>= 0).
+    eta12: viscosity on the engineering shear strain rate [Pa s] (>= 0).
+    """
+
+    eta1: float
+    eta2: float
+    eta12: float
+
+    def __post_init__(self) -> None:
+        for name in ("eta1", "eta2", "eta12"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"viscosity {name} must be a finite number >= 0 Pa s, got {v!r}")
+        if self.eta1 == self.eta2 == self.eta12 == 0:
+            raise ValueError("viscosity: at least one of eta1, eta2, eta12 must be > 0 Pa s")
+
+    def weights(self) -> np.ndarray:
+        """The factors on (E11 - E11,n)^2, (E22 - E22,n)^2, (E12 - E12,n)^2 [Pa s]."""
+        return np.array([self.eta1, self.eta2, 4.0 * self.eta12])
+
+
+def explicit_step_factor(*, omega: float, viscosity: FabricViscosity, E: float, G: float) -> float:
+    """Factor (<= 1) on the undamped stable step 2 / omega of the central difference with the
+    viscous membrane. A mode family whose highest angular frequency is w and damping ratio
+    xi = w eta / (2 M) is stable for h <= (2 / w) (sqrt(1 + xi^2) - xi). Tensile modes:
+    w = omega (the system's highest frequency, taken as a membrane one: conservative
+    otherwise), M = the smaller yarn modulus E, eta = max(eta1, eta2); shear modes: w = omega
+    sqrt(G / E) (the shear wave is slower by that ratio), M = G, eta = eta12."""
+    factor = 1.0
+    for eta, M, ratio in (
+        (max(viscosity.eta1, viscosity.eta2), E, 1.0),
+        (viscosity.eta12, G, math.sqrt(G / E)),
+    ):
+        xi = omega * ratio * eta / (2.0 * M)
+        factor = min(factor, (math.sqrt(1.0 + xi * xi) - xi) / ratio)
+    return factor
+
+
+class MembraneViscosity:
+    """History and forms of :class:`FabricViscosity` on a shell model (built by ShellModel):
+    the committed strains (E11, E22, E12) at the points of the reduced membrane rule
+    (degree ``degree``, measure ``dx``), the cumulated dissipation density [J/m^3], the
+    constant ``inv_h`` = 1 / time step [1/s] and ``energy``, the UFL potential added to the
+    membrane term."""
+
+    def __init__(
+        self,
+        mesh: dolfinx.mesh.Mesh,
+        viscosity: FabricViscosity,
+        eps: ufl.core.expr.Expr,
+        t: fem.Constant,
+        *,
+        degree: int,
+        dx: ufl.Measure,
+    ) -> None:
+        from ffcx.element_interface import create_quadrature
+
+        self.mesh, self.viscosity = mesh, viscosity
+        self.inv_h = fem.Constant(mesh, 0.0)
+        self.eta = fem.Constant(mesh, viscosity.weights())
+        cell = mesh.ufl_cell()
+        He = ufl.VectorElement("Quadrature", cell, degree, dim=3, quad_scheme="default")
+        De = ufl.FiniteElement("Quadrature", cell, degree, quad_scheme="default")
+        self.history = H = fem.Function(fem.FunctionSpace(mesh, He), name="membrane_strain")
+        self.dissipation = D = fem.Function(fem.FunctionSpace(mesh, De), name="viscous_dissipation")
+        points, _ = create_quadrature(cell.cellname(), degree, "default")
+        strain = ufl.as_vector([eps[0, 0], eps[1, 1], eps[0, 1]])
+        self._strain = fem.Expression(strain, points)
+        self._nq = len(points)
+        rate2 = sum(self.eta[i] * (strain[i] - H[i]) ** 2 for i in range(3))
+        self.energy = 0.5 * t * self.inv_h * rate2 * dx
+        self._dissipated_form = fem.form(t * D * dx)
+
+    def advance(self) -> None:
+        """Add the step's dissipation eta (E - E_n)^2 / h at every point and make the current
+        strains the history (no collective call)."""
+        imap = self.mesh.topology.index_map(2)
+        n_cells = imap.size_local + imap.num_ghosts
+        cells = np.arange(n_cells, dtype=np.int32)
+        nq = self._nq
+        e = self._strain.eval(cells).reshape(n_cells, nq, 3)
+        dofs = self.dissipation.function_space.dofmap.list.array.reshape(n_cells, nq)
+        h = self.history.x.array.reshape(-1, 3)
+        d = e - h[dofs]
+        w = self.viscosity.weights()
+        self.dissipation.x.array[dofs] += float(self.inv_h.value) * (d * d) @ w
+        h[dofs] = e
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """The history and the cumulated dissipation (local arrays, for a checkpoint)."""
+        return {
+            "viscous_history": self.history.x.array.copy(),
+            "viscous_dissipation": self.dissipation.x.array.copy(),
+        }
+
+    def restore_arrays(self, data: dict[str, np.ndarray]) -> None:
+        """Restore :meth:`state_arrays` of the same model and partition."""
+        for name, f in (
+            ("viscous_history", self.history),
+            ("viscous_dissipation", self.dissipation),
+        ):
+            if data[name].shape != f.x.array.shape:
+                raise ValueError(
+                    f"{name} must have shape {f.x.array.shape} (same model and partition), "
+                    f"got {data[name].shape}"
+                )
+            f.x.array[:] = data[name]
+
+    def dissipated(self) -> float:
+        """Energy [J] dissipated by the viscosity since the start (collective)."""
+        return self.mesh.comm.allreduce(fem.assemble_scalar(self._dissipated_form), op=MPI.SUM)
