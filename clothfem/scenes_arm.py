@@ -1107,7 +1107,7 @@ def _run_explicit(
         if visc is not None:  # the damped central difference's smaller stable step
             mat = model.material
             factor = explicit_step_factor(
-                omega=st.omega_max, viscosity=visc, E=min(mat.E1, mat.E2), G=mat.G12
+                omega=st.omega_max, viscosity=visc, E1=mat.E1, E2=mat.E2, G12=mat.G12
             )
             dt *= factor
             rank0_print(f"  explicit: membrane viscosity, step x {factor:.3f}")

@@ -69,21 +69,19 @@ class FabricViscosity:
         return np.array([self.eta1, self.eta2, 4.0 * self.eta12])
 
 
-def explicit_step_factor(*, omega: float, viscosity: FabricViscosity, E: float, G: float) -> float:
+def explicit_step_factor(
+    *, omega: float, viscosity: FabricViscosity, E1: float, E2: float, G12: float
+) -> float:
     """Factor (<= 1) on the undamped stable step 2 / omega of the central difference with the
-    viscous membrane. A mode family whose highest angular frequency is w and damping ratio
-    xi = w eta / (2 M) is stable for h <= (2 / w) (sqrt(1 + xi^2) - xi). Tensile modes:
-    w = omega (the system's highest frequency, taken as a membrane one: conservative
-    otherwise), M = the smaller yarn modulus E, eta = max(eta1, eta2); shear modes: w = omega
-    sqrt(G / E) (the shear wave is slower by that ratio), M = G, eta = eta12."""
-    factor = 1.0
-    for eta, M, ratio in (
-        (max(viscosity.eta1, viscosity.eta2), E, 1.0),
-        (viscosity.eta12, G, math.sqrt(G / E)),
-    ):
-        xi = omega * ratio * eta / (2.0 * M)
-        factor = min(factor, (math.sqrt(1.0 + xi * xi) - xi) / ratio)
-    return factor
+    viscous membrane. A mode of angular frequency w and damping ratio xi is stable for
+    h <= (2 / w) (sqrt(1 + xi^2) - xi) (also with the rate lagged by half a step, as here).
+    A mode near the highest frequency omega may strain the membrane in any mix of the three
+    components, so xi is bounded by omega max(eta1 / E1, eta2 / E2, eta12 / G12) / 2 (the
+    largest relaxation time of the three): safe, and costly for a large shear viscosity
+    (a bound from the shear modes' lower frequencies alone let the arm-sleeve run blow up)."""
+    tau = max(viscosity.eta1 / E1, viscosity.eta2 / E2, viscosity.eta12 / G12)
+    xi = 0.5 * omega * tau
+    return math.sqrt(1.0 + xi * xi) - xi
 
 
 class MembraneViscosity:

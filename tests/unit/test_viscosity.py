@@ -183,19 +183,13 @@ def test_damped_axial_vibration_decays_at_the_mode_rate():
 
 
 def test_explicit_step_factor():
-    """No viscosity-like terms: factor 1; the tensile bound sqrt(1 + xi^2) - xi; the shear
-    modes at omega sqrt(G / E) bound it when eta12 is large."""
-    vis = FabricViscosity(eta1=0.0, eta2=0.0, eta12=1e-12)
-    assert explicit_step_factor(omega=1e4, viscosity=vis, E=E, G=1e5) == pytest.approx(1.0)
-    vis = FabricViscosity(eta1=100.0, eta2=50.0, eta12=0.0)
-    xi = 1e4 * 100.0 / (2 * E)
-    f = explicit_step_factor(omega=1e4, viscosity=vis, E=E, G=1e5)
-    assert f == pytest.approx(math.sqrt(1 + xi**2) - xi, rel=1e-12)
-    big = FabricViscosity(eta1=0.0, eta2=0.0, eta12=1000.0)
-    r = math.sqrt(1e5 / E)
-    xs = 1e4 * r * 1000.0 / 2e5
-    f = explicit_step_factor(omega=1e4, viscosity=big, E=E, G=1e5)
-    assert f == pytest.approx((math.sqrt(1 + xs**2) - xs) / r, rel=1e-12) and f < 1
+    """sqrt(1 + xi^2) - xi with xi = omega max(eta1 / E1, eta2 / E2, eta12 / G12) / 2: the
+    largest relaxation time of the three components sets it."""
+    for eta, tau in (((100.0, 50.0, 0.0), 100.0 / E), ((10.0, 10.0, 40.0), 40.0 / 1e5)):
+        vis = FabricViscosity(eta1=eta[0], eta2=eta[1], eta12=eta[2])
+        xi = 0.5 * 1e4 * tau
+        f = explicit_step_factor(omega=1e4, viscosity=vis, E1=E, E2=0.5 * E, G12=1e5)
+        assert f == pytest.approx(math.sqrt(1 + xi**2) - xi, rel=1e-12) and 0 < f < 1
 
 
 def test_bad_input_one_line_errors():
