@@ -509,6 +509,7 @@ def run_scene(
         with ResultWriter(out, model) as writer:
 
             def on_step(rec):
+                model.commit_material()  # a converged load step: material history to it
                 writer.write(
                     rec.load_factor,
                     {
@@ -518,6 +519,7 @@ def run_scene(
                         "cutbacks": rec.cutbacks,
                         "residual": rec.residual_final,
                         "strain_energy": model.strain_energy(),
+                        "dissipation_material": model.dissipated_material(),
                         "wall_time": time.perf_counter() - t0,
                     },
                 )

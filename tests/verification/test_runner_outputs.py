@@ -392,6 +392,25 @@ def test_free_drape_scene(tmp_path):
     assert times[-1] == pytest.approx(0.02) and uz.min() < -1e-3  # ~ g t^2 / 2 = 2 mm
 
 
+@pytest.mark.parametrize(
+    ("name", "sets", "column"),
+    [
+        ("sleeve_gravity", [], "step"),
+        ("drape_free", ["solver.duration=0.02"], "time"),
+    ],
+)
+def test_hysteretic_preset_in_scenes_without_a_body(tmp_path, name, sets, column):
+    """The decrimping + yarn-friction preset in the static and the explicit runner without a
+    body: the history's material dissipation starts >= 0 and never decreases, and is > 0."""
+    base = _shared(tmp_path)
+    extra = ["material.preset=decrimping-cotton-hysteretic", "output.png=false"]
+    scene = scenes.load(ROOT / "demos" / "scenes" / f"{name}.toml", [*sets, *extra])
+    rows = _rows(run_scene(scene, base / name, comm=COMM))
+    d = np.array([float(r["dissipation_material"]) for r in rows])
+    assert len(rows) >= 2 and column in rows[0]
+    assert d[0] >= 0.0 and np.all(np.diff(d) >= 0.0) and d[-1] > 0.0
+
+
 def test_mocap_scene(tmp_path):
     """demos/scenes/sleeve_mocap.toml (an arm moved by the C3D file) past the settling into
     the recording: the forearm follows the recorded elbow flexion, the run writes its rows."""
