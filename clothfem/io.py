@@ -27,6 +27,9 @@ from typing import Any
 import numpy as np
 from mpi4py import MPI
 
+from .history import NAMES as HISTORY_NAMES
+from .history import check_row, write_units
+
 __all__ = [
     "FieldSeries",
     "Progress",
@@ -239,10 +242,15 @@ class ResultWriter:
         name: str = "fabric",
         keep_rows: int | None = None,
         resume_after: float | None = None,
+        columns: Sequence[str] | None = None,
     ) -> None:
         """``keep_rows``: continue an existing ``history.csv`` after its first ``keep_rows``
         rows (later rows are dropped: a resumed run rewrites them); None starts a new one.
-        ``resume_after``: continue the field series after that time (:class:`FieldSeries`)."""
+        ``resume_after``: continue the field series after that time (:class:`FieldSeries`).
+        ``columns``: the history's columns; None: the runners' one format
+        (:data:`clothfem.history.COLUMNS`, with its units file ``history_columns.csv``)."""
+        self.columns = tuple(HISTORY_NAMES if columns is None else columns)
+        self._standard = columns is None
         self.out = Path(out)
         self.comm = model.comm
         if self.comm.rank == 0:
@@ -262,6 +270,8 @@ class ResultWriter:
             self._writer.writeheader()
             self._writer.writerows(rows)
             self._csv.flush()
+            if self._standard:
+                write_units(self.out)
 
     @property
     def last_time(self) -> float:
@@ -279,12 +289,20 @@ class ResultWriter:
         self.append_row(row)
 
     def append_row(self, row: dict[str, float]) -> None:
-        """Append ``row`` to the CSV history (flushed at once) without writing fields."""
+        """Append ``row`` to the CSV history (flushed at once) without writing fields. The
+        history has the writer's ``columns``, in that order (those ``row`` lacks are left
+        empty); with the standard columns the first row also writes their units beside it."""
+        if self._standard:
+            check_row(row)
+        elif set(row) - set(self.columns):
+            raise ValueError(f"history row has columns outside {self.columns}: {sorted(row)}")
         if self.comm.rank == 0:
             if self._writer is None:
                 self._csv = open(self.csv_path, "w", newline="")  # noqa: SIM115
-                self._writer = csv.DictWriter(self._csv, fieldnames=list(row))
+                self._writer = csv.DictWriter(self._csv, fieldnames=list(self.columns))
                 self._writer.writeheader()
+                if self._standard:
+                    write_units(self.out)
             self._writer.writerow(row)
             self._csv.flush()
             os.fsync(self._csv.fileno())

@@ -65,6 +65,7 @@ __all__ = [
 # what a run writes into its folder (file name patterns; checkpoint/ holds rank files)
 RUN_FILES = (
     "history.csv",
+    "history_columns.csv",
     "summary.json",
     "fabric.xdmf",
     "fabric.h5",
@@ -505,24 +506,30 @@ def run_scene(
         rank0_print(f"done in {time.perf_counter() - t0:.1f} s; results in {out}/")
         return out
     progress = Progress(label=scene["scene"]["name"], comm=comm)
+    clock = {"row": time.perf_counter()}
     try:
         with ResultWriter(out, model) as writer:
 
             def on_step(rec):
                 model.commit_material()  # a converged load step: material history to it
+                now = time.perf_counter()
                 writer.write(
                     rec.load_factor,
                     {
-                        "step": rec.step,
+                        "stage": "load",
+                        "increment": rec.step,
                         "load_factor": rec.load_factor,
-                        "newton": rec.newton_iterations,
+                        "substeps": 1,
                         "cutbacks": rec.cutbacks,
+                        "newton_iterations": rec.newton_iterations,
                         "residual": rec.residual_final,
                         "strain_energy": model.strain_energy(),
                         "dissipation_material": model.dissipated_material(),
-                        "wall_time": time.perf_counter() - t0,
+                        "wall_time": now - clock["row"],
+                        "elapsed": now - t0,
                     },
                 )
+                clock["row"] = now
                 progress.update(rec.load_factor, rec.line())
                 if comm.allreduce(stop["signal"] is not None, op=MPI.LOR):
                     raise RunStopped(

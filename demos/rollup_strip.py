@@ -45,7 +45,8 @@ model = ShellModel(
 # Load stepping; every converged step is written at once.
 t0 = time.perf_counter()
 inc = 1.0 / args.steps
-with ResultWriter(args.out, model) as writer:
+columns = ("load_factor", "tip_ux", "tip_uz", "newton", "strain_energy", "wall_time")
+with ResultWriter(args.out, model, columns=columns) as writer:
 
     def on_step(rec):
         tip = model.displacement_at((L, 0.0, 0.0))

@@ -20,6 +20,8 @@ from mpi4py import MPI
 from clothfem import scene as scenes
 from clothfem import scenes_arm
 from clothfem.cli import main
+from clothfem.history import NAMES as HISTORY_NAMES
+from clothfem.history import UNITS_FILE
 from clothfem.run import RUN_FILES, check_output, clear_output, run_scene
 from clothfem.scene import SceneError
 
@@ -54,7 +56,16 @@ def _shared(tmp_path: Path) -> Path:
 
 
 def _rows(out: Path) -> list[dict[str, str]]:
-    return list(csv.DictReader((out / "history.csv").open()))
+    """The history's rows; checks on the way that it has the one history format (the
+    columns of clothfem.history.COLUMNS in order, their units in history_columns.csv)."""
+    with (out / "history.csv").open() as fh:
+        reader = csv.DictReader(fh)
+        rows = list(reader)
+        assert tuple(reader.fieldnames) == HISTORY_NAMES
+    with (out / UNITS_FILE).open() as fh:
+        units = list(csv.DictReader(fh))
+    assert [u["column"] for u in units] == list(HISTORY_NAMES) and all(u["unit"] for u in units)
+    return rows
 
 
 def _series(out: Path) -> tuple[list[float], list[dict[str, np.ndarray]]]:
@@ -395,7 +406,7 @@ def test_free_drape_scene(tmp_path):
 @pytest.mark.parametrize(
     ("name", "sets", "column"),
     [
-        ("sleeve_gravity", [], "step"),
+        ("sleeve_gravity", [], "residual"),
         ("drape_free", ["solver.duration=0.02"], "time"),
     ],
 )
