@@ -314,36 +314,29 @@ def pants_lattice(
     order: int = 2,
 ) -> PantsLattice:
     """Nodes and quadrilateral cells of :func:`pants` (same arguments), without gmsh."""
-    dims = _Dims(
-        waist=_positive("waist_radius", waist_radius),
-        leg=_positive("leg_radius", leg_radius),
-        spacing=_positive("leg_spacing", leg_spacing),
-        leg_length=_positive("leg_length", leg_length),
-        depth=_positive("crotch_depth", crotch_depth),
-        hip_a=0.0,
-        hip_b=0.0,
-    )
     if leg_spacing < 2.2 * leg_radius:
         raise ValueError(
             f"leg_spacing must be >= 2.2 leg_radius = {2.2 * leg_radius:.4g} m (a gap between "
             f"the legs for the crotch arch), got {leg_spacing!r}"
         )
-    a, b = _hip_semi_axes(dims.leg, dims.spacing, hip_radius)
-    dims = _Dims(**{**dims.__dict__, "hip_a": a, "hip_b": b})
-    n_around = _positive_int("n_around", n_around, 8)
-    if n_around % 4:
-        raise ValueError(f"n_around must be a multiple of 4, got {n_around}")
-    n_along = _positive_int("n_along", n_along, 3)
-    if n_bridge is None:
-        n_bridge = max(2, 2 * (n_around // 8))
-    if int(n_bridge) != n_bridge or n_bridge % 2 or not 2 <= n_bridge <= n_around // 2:
-        raise ValueError(f"n_bridge must be even, 2 <= n_bridge <= n_around / 2, got {n_bridge!r}")
-    if n_rise is None:
-        n_rise = max(3, round(crotch_depth * n_along / leg_length))
-    n_rise = _positive_int("n_rise", n_rise, 3)
+    if hip_radius is not None:
+        _positive("hip_radius", hip_radius)
+    a, b = _hip_semi_axes(_positive("leg_radius", leg_radius), leg_spacing, hip_radius)
+    dims = _Dims(
+        waist=_positive("waist_radius", waist_radius),
+        leg=leg_radius,
+        spacing=_positive("leg_spacing", leg_spacing),
+        leg_length=_positive("leg_length", leg_length),
+        depth=_positive("crotch_depth", crotch_depth),
+        hip_a=a,
+        hip_b=b,
+    )
+    n_around, n_along, n_rise, n_bridge = _cell_counts(
+        n_around, n_along, n_rise, n_bridge, crotch_depth / leg_length
+    )
     if order not in (1, 2):
         raise ValueError(f"order must be 1 or 2, got {order!r}")
-    grid = _grid(n_around, int(n_bridge), n_along, n_rise, order)
+    grid = _grid(n_around, n_bridge, n_along, n_rise, order)
     x = _place_nodes(dims, grid, order)
     cells = np.concatenate(
         [
@@ -353,6 +346,23 @@ def pants_lattice(
         ]
     )
     return PantsLattice(x, cells, _boundary_edges(grid, order), (a, b))
+
+
+def _cell_counts(
+    n_around: int, n_along: int, n_rise: int | None, n_bridge: int | None, rise_ratio: float
+) -> tuple[int, int, int, int]:
+    """Checked cell counts, the defaults of ``n_rise`` and ``n_bridge`` filled in."""
+    n_around = _positive_int("n_around", n_around, 8)
+    if n_around % 4:
+        raise ValueError(f"n_around must be a multiple of 4, got {n_around}")
+    n_along = _positive_int("n_along", n_along, 3)
+    if n_bridge is None:
+        n_bridge = max(2, 2 * (n_around // 8))
+    if int(n_bridge) != n_bridge or n_bridge % 2 or not 2 <= n_bridge <= n_around // 2:
+        raise ValueError(f"n_bridge must be even, 2 <= n_bridge <= n_around / 2, got {n_bridge!r}")
+    if n_rise is None:
+        n_rise = max(3, round(rise_ratio * n_along))
+    return n_around, n_along, _positive_int("n_rise", n_rise, 3), int(n_bridge)
 
 
 def _boundary_edges(grid: _Grid, order: int) -> dict[str, np.ndarray]:
@@ -368,15 +378,15 @@ def _boundary_edges(grid: _Grid, order: int) -> dict[str, np.ndarray]:
     return out
 
 
-def _respace(x: np.ndarray, path: np.ndarray, moving: slice, closed: bool = False) -> None:
+def _respace(x: np.ndarray, path: np.ndarray, moving: slice) -> None:
     """Move the nodes ``path[moving]`` along the curve through all of ``path`` (cubic spline
     in chord length) so that the nodes from ``path[moving.start - 1]`` to ``path[moving.stop]``
     are evenly spaced in arc length; the rest of ``path`` only shapes the curve."""
     from scipy.interpolate import CubicSpline
 
-    p = x[np.append(path, path[0])] if closed else x[path]
+    p = x[path]
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
-    curve = CubicSpline(s, p, bc_type="periodic" if closed else "not-a-knot")
+    curve = CubicSpline(s, p)
     fine = np.linspace(s[moving.start - 1], s[moving.stop], 64 * (moving.stop - moving.start + 1))
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(curve(fine), axis=0), axis=1))])
     n = moving.stop - moving.start + 1
@@ -454,8 +464,9 @@ def pants(
     """A pair of pants as a fabric surface mesh (geometry in the module docstring).
 
     waist_radius: radius of the waist circle (z = 0) [m].
-    hip_radius: radius of the circle of the hip section's perimeter [m]; None: 5 % deeper
-        than the smallest ellipse round both legs (1.0 m hip girth with the defaults).
+    hip_radius: hip girth / (2 pi) [m], the perimeter of the hip ellipse (its x semi-axis is
+        leg_spacing/2 + leg_radius); None: the ellipse 5 % deeper than the smallest one
+        round both legs (semi-axes 0.200 x 0.113 m, girth 1.00 m with the defaults).
     leg_radius: radius of the leg tubes [m]; leg_length: crotch to hem (inseam) [m].
     crotch_depth: waist to crotch (the rise) [m].
     leg_spacing: distance between the leg axes [m], at least 2.2 leg_radius.
