@@ -57,7 +57,9 @@ FloatArray = NDArray[np.float64]
 class StepInfo:
     """Diagnostics of one step: time [s] at its end; contact nodes; contact force on the
     fabric [N] (sum over nodes, (3,)); smallest gap after the correction [m] (inf without
-    contact); strain-limit sweeps; Newton iterations (0 for explicit)."""
+    contact); strain-limit sweeps; Newton iterations (0 for explicit); the contact force on
+    the fabric at every node [N] ((n, 3), zero off contact; the body gets its negative, as
+    in Eq. 28)."""
 
     t: float
     active: int
@@ -65,6 +67,7 @@ class StepInfo:
     min_gap: float
     limit_sweeps: int
     newton: int
+    node_force: FloatArray
 
 
 def bodies(source):
@@ -120,9 +123,10 @@ def limit_strain(model: ParticleModel, x: FloatArray) -> int:
 
 
 def _contact(model: ParticleModel, x: FloatArray, v: FloatArray, t: float, dt: float):
-    """FILM correction (in place) of the predictor; returns (active, force sum, min gap)."""
+    """FILM correction (in place) of the predictor; returns (active, force sum, min gap,
+    nodal forces on the fabric)."""
     if model.bodies is None:
-        return 0, np.zeros(3), math.inf
+        return 0, np.zeros(3), math.inf, np.zeros_like(x)
     from clothfem.contact.explicit import film_step
 
     geo, vel = model.bodies(t)
@@ -134,7 +138,9 @@ def _contact(model: ParticleModel, x: FloatArray, v: FloatArray, t: float, dt: f
     act = np.flatnonzero(res.active)
     x[act], v[act] = res.x[act], res.v[act]
     gap = float(np.min(res.gap[~model.fixed], initial=math.inf))
-    return act.size, res.force[act].sum(axis=0), gap
+    nodal = np.zeros_like(x)
+    nodal[act] = res.force[act]
+    return act.size, nodal[act].sum(axis=0), gap, nodal
 
 
 def _finish(model, x_old, x, v_half, t1, dt) -> tuple[int, tuple]:
@@ -151,12 +157,12 @@ def step_explicit(model: ParticleModel, state: ParticleState, dt: float) -> tupl
     v_half = state.v + 0.5 * dt * state.a
     x = state.x + dt * v_half
     t1 = state.t + dt
-    sweeps, (act, force, gap) = _finish(model, state.x, x, v_half, t1, dt)
+    sweeps, (act, force, gap, nodal) = _finish(model, state.x, x, v_half, t1, dt)
     a = accelerations(model, x, v_half)
     v = v_half + 0.5 * dt * a
     v[model.fixed] = v_half[model.fixed]
     new = ParticleState(t=t1, x=x, v=v, a=a)
-    return new, StepInfo(t1, act, force, gap, sweeps, 0)
+    return new, StepInfo(t1, act, force, gap, sweeps, 0, nodal)
 
 
 def step_implicit(
@@ -186,9 +192,9 @@ def step_implicit(
         J = (diags(m3) - dt * C - dt * dt * K).tocsr()[free][:, free]
         v.reshape(-1)[free] -= spsolve(J.tocsc(), r)
     x = x0 + dt * v
-    sweeps, (act, force, gap) = _finish(model, x0, x, v, t1, dt)
+    sweeps, (act, force, gap, nodal) = _finish(model, x0, x, v, t1, dt)
     new = ParticleState(t=t1, x=x, v=v, a=accelerations(model, x, v))
-    return new, StepInfo(t1, act, force, gap, sweeps, newton)
+    return new, StepInfo(t1, act, force, gap, sweeps, newton, nodal)
 
 
 def _check_dt(dt: float) -> None:
