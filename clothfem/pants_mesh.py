@@ -8,7 +8,7 @@ x = +-``leg_spacing``/2, y = 0, from the crotch (z = -``crotch_depth``) down to 
 (z = -``crotch_depth`` - ``leg_length``).
 
 Above the crotch the torso is a tube of elliptical cross-section: at hip level (from the
-crotch up to 60 % of the rise) the ellipse of semi-axes ``leg_spacing``/2 + ``leg_radius``
+crotch up to 40 % of the rise) the ellipse of semi-axes ``leg_spacing``/2 + ``leg_radius``
 (x) and b (y) that encloses both legs, b from ``hip_radius`` (the ellipse's perimeter is
 2 pi ``hip_radius``) or, by default, 5 % more than the smallest b that encloses the legs;
 from there it narrows smoothly (smoothstep, vertical at both ends) to the waist circle.
@@ -24,8 +24,8 @@ sagging a few cm below the crotch points), which the inner sides of both legs re
 below as an arch, so that no cells meet back to back. The rows are placed so that the
 crotch points lie at z = -``crotch_depth``; the band's nodes are then spaced evenly along
 the lattice columns, so that the cells under the crotch are about as tall as the others.
-The band's shape depends a little on the row counts (areas within 0.5 % from 12 x 15 to
-48 x 60 cells per leg, 2.6 % less with 8 x 10).
+The band's shape depends a little on the row counts (areas within 0.6 % from 12 x 15 to
+48 x 60 cells per leg, 3.5 % less with 8 x 10).
 
 Cell layout: ``n_around`` cells around each leg, of which ``n_bridge`` (default a quarter,
 even) meet the other leg at the bridge; the other ``n_around - n_bridge`` continue into the
@@ -52,7 +52,7 @@ from clothfem.mesh import SurfaceMesh, _check_cell, _model_to_mesh, _positive, _
 __all__ = ["PantsLattice", "pants", "pants_lattice", "write_pants_msh"]
 
 BOUNDARY_TAGS = {"waist": 1, "left_hem": 2, "right_hem": 3}
-_HIP_TOP = 0.6  # fraction of the rise (crotch to waist) where the hip section ends
+_HIP_TOP = 0.4  # fraction of the rise (crotch to waist) where the hip section ends
 _BAND_BELOW, _BAND_ABOVE = 0.2, 0.12  # [m] thin-plate band below and above the crotch
 
 

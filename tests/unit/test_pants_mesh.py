@@ -126,10 +126,10 @@ def test_normals_point_outwards(coarse):
     assert np.all(cos[exact] > 1 - 1e-12)
 
 
-@pytest.mark.parametrize("n_around, n_along, bound", [(8, 6, 0.3), (16, 20, 0.45), (32, 40, 0.35)])
+@pytest.mark.parametrize("n_around, n_along, bound", [(8, 6, 0.3), (16, 20, 0.4), (32, 40, 0.35)])
 def test_edge_lengths(n_around, n_along, bound):
     """No short edges at the crotch: the shortest edge is at least 0.6 of the shortest edge
-    of the exact leg tubes (0.65, 0.74, 0.79 measured), and min/max over the whole mesh is
+    of the exact leg tubes (0.66, 0.75, 0.78 measured), and min/max over the whole mesh is
     above ``bound`` (the longest edges are along the crotch row next to the crotch
     points)."""
     lattice = pants_lattice(**GEOM, n_around=n_around, n_along=n_along)
