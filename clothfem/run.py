@@ -229,6 +229,20 @@ def build_mesh(scene: dict[str, Any], comm: MPI.Comm) -> meshes.SurfaceMesh:
             n_along=m["n_along"],
             **common,
         )
+    elif gen == "pants":
+        from .pants_mesh import pants
+
+        dims = ("waist_radius", "leg_radius", "leg_length", "crotch_depth", "leg_spacing")
+        try:
+            sm = pants(
+                comm,
+                n_around=m["n_around"],
+                n_along=m["n_along"],
+                **{k: m[k] for k in dims if m[k] is not None},
+                **common,
+            )
+        except ValueError as exc:
+            raise SceneError(f"scene key 'mesh': {exc}") from None
     else:
         try:
             sm = meshes.load_msh(m["file"], comm)

@@ -129,7 +129,7 @@ SCHEMA: dict[str, Section] = {
                 "choice",
                 "mesh source",
                 required=True,
-                choices=("strip", "cylinder", "panel", "file"),
+                choices=("strip", "cylinder", "panel", "pants", "file"),
             ),
             "file": Key("str", "gmsh .msh surface mesh with physical groups (generator = file)"),
             "length": Key("float", "strip/tube/panel length along x [m]", **POS),
@@ -138,8 +138,19 @@ SCHEMA: dict[str, Section] = {
             "angle": Key("float", "panel half-opening angle [deg]", lo=0.0, hi=180.0, open_lo=True),
             "nx": Key("int", "strip cells along x", lo=1),
             "ny": Key("int", "strip cells across", lo=1),
-            "n_around": Key("int", "tube/panel cells around (tube: multiple of 4)", lo=1),
-            "n_along": Key("int", "tube/panel cells along x", lo=1),
+            "n_around": Key(
+                "int", "tube/panel cells around (tube, pants: multiple of 4; pants: per leg)", lo=1
+            ),
+            "n_along": Key("int", "tube/panel cells along x (pants: rows along each leg)", lo=1),
+            "waist_radius": Key("float", "pants: waist circle radius [m] (default 0.14)", **POS),
+            "leg_radius": Key("float", "pants: leg tube radius [m] (default 0.09)", **POS),
+            "leg_length": Key("float", "pants: crotch to hem [m] (default 0.75)", **POS),
+            "crotch_depth": Key("float", "pants: waist to crotch [m] (default 0.25)", **POS),
+            "leg_spacing": Key(
+                "float",
+                "pants: distance of the leg axes [m], >= 2.2 leg_radius (default 0.22)",
+                **POS,
+            ),
             "cell": Key(
                 "choice",
                 "cell type",
@@ -154,6 +165,7 @@ SCHEMA: dict[str, Section] = {
             "strip": ("length", "width", "nx", "ny"),
             "cylinder": ("radius", "length", "n_around", "n_along"),
             "panel": ("radius", "length", "angle", "n_around", "n_along"),
+            "pants": ("n_around", "n_along"),
             "file": ("file",),
         },
     ),
@@ -724,11 +736,22 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
             f"material.{missing}",
             "required with the other material.friction_* keys (all four or none)",
         )
-    if out["mesh"]["generator"] == "cylinder" and out["mesh"]["n_around"] % 4:
+    if out["mesh"]["generator"] in ("cylinder", "pants") and out["mesh"]["n_around"] % 4:
         _fail(
             "mesh.n_around",
-            f"must be a multiple of 4 for a cylinder, got {out['mesh']['n_around']}",
+            f"must be a multiple of 4 for a {out['mesh']['generator']}, "
+            f"got {out['mesh']['n_around']}",
         )
+    m = out["mesh"]
+    if m["generator"] == "pants":
+        leg = m["leg_radius"] if m["leg_radius"] is not None else 0.09
+        spacing = m["leg_spacing"] if m["leg_spacing"] is not None else 0.22
+        if spacing < 2.2 * leg:
+            _fail(
+                "mesh.leg_spacing",
+                f"must be >= 2.2 leg_radius = {2.2 * leg:.4g} m (a gap for the crotch arch), "
+                f"got {spacing!r}",
+            )
     el = out["element"]
     if el["scheme"] == "psri" and el["stabilization"] != 0.0:
         _fail("element.stabilization", "is a parameter of element.scheme = 'sri' only")
