@@ -70,6 +70,14 @@ def test_defaults_filled():
             ),
             "'mesh.n_around': must be a multiple of 4",
         ),
+        (
+            _with("mesh", {"generator": "pants", "n_around": 16, "n_along": 4, "leg_spacing": 0.1}),
+            r"'mesh.leg_spacing': must be >= 2.2 leg_radius = 0.198 m",
+        ),
+        (
+            _with("mesh", {"generator": "pants", "n_around": 6, "n_along": 4}),
+            "'mesh.n_around': must be a multiple of 4 for a pants",
+        ),
         (_with("solver.integrator", "euler"), "'solver.integrator': must be one of 'static'"),
         (
             _with("contact.newton_stall_limit", 0),
