@@ -213,3 +213,47 @@ def test_membrane_patch_test_on_distorted_cells(scheme):
     exact = model.x_nodes[:n] @ G.T
     assert np.max(np.abs(u - exact), initial=0.0) < 1e-10
     assert np.max(np.abs(model.theta.x.array), initial=0.0) < 1e-10
+
+
+def _bending_patch_error(n: int, distorted: bool) -> float:
+    """max |w - w_exact| / w_tip of a square plate (1 m, t = 0.01 m, E = 1.2 MPa, nu = 0)
+    clamped at x = 0 under a uniform end moment m at x = 1 (linear solution, n x n cells,
+    PSRI): the exact state is constant curvature, w = m x^2 / (2 D), no shear, no in-plane
+    displacement. ``distorted``: interior nodes moved by the smooth map of the membrane
+    patch test (curved cell edges, the boundary kept)."""
+    from clothfem.shell import EdgeMoment
+    from clothfem.verification import _solve_small_load
+
+    E, t, m = 1.2e6, 0.01, 1e-4
+    D = E * t**3 / 12
+    sm = meshes.strip(COMM, length=1.0, width=1.0, nx=n, ny=n)
+    if distorted:
+        x = sm.mesh.geometry.x
+        bump = np.sin(math.pi * x[:, 0]) * np.cos(math.pi * x[:, 1])  # 0 on the boundary
+        x[:, 0] += 0.12 * bump
+        x[:, 1] += 0.08 * bump * np.sin(2.0 * math.pi * x[:, 0])
+    model = ShellModel(
+        sm,
+        material=FabricMaterial.isotropic(E=E, nu=0.0),
+        thickness=t,
+        loads=[EdgeMoment("tip", (0.0, -m, 0.0))],
+        supports=[Clamp("root")],
+    )
+    _solve_small_load(model, prefix="bend_patch_")
+    k = model.n_owned
+    X, u = model.x_nodes[:k], model.u.x.array.reshape(-1, 3)[:k]
+    err = np.max(np.abs(u[:, 2] - m * X[:, 0] ** 2 / (2 * D)), initial=0.0) / (m / (2 * D))
+    return COMM.allreduce(float(err), op=MPI.MAX)
+
+
+def test_bending_patch_test():
+    """Constant curvature (pure bending of a clamped plate by an end moment, linear): exact on
+    rectangular cells (1e-9); on cells with curved edges the quadratic w is not in the
+    isoparametric space, so the state is not reproduced exactly but converges at about
+    h^3 (measured 2026-12-02: 1.4e-2, 2.2e-3, 1.7e-4 of the tip deflection on 3x3, 6x6,
+    12x12, orders 2.6 and 3.7); asserted: order > 2.3 on each refinement and below 1e-3
+    on 12x12."""
+    assert _bending_patch_error(3, False) < 1e-9
+    errs = [_bending_patch_error(n, True) for n in (3, 6, 12)]
+    orders = [math.log2(a / b) for a, b in zip(errs, errs[1:], strict=False)]
+    assert min(orders) > 2.3 and errs[-1] < 1e-3, (errs, orders)
