@@ -7,10 +7,22 @@ body axes ``e1, e2, e3`` as columns; :class:`Ellipsoid` stores them as rows (``a
 
 Modules: :mod:`~clothfem.body.pose` (Pose, Motion), :mod:`~clothfem.body.ellipsoid`
 (Ellipsoid, Segment, Body), :mod:`~clothfem.body.motion` (Eq. 27, interpolated and analytic
-motions, joint angles), :mod:`~clothfem.body.mocap` (C3D/TRC, gap filling, marker maps).
+motions, joint angles), :mod:`~clothfem.body.mocap` (C3D/TRC, gap filling, marker maps),
+:mod:`~clothfem.body.lower_body` (pelvis, thighs, shanks and feet from a gait capture).
 """
 
 from clothfem.body.ellipsoid import Body, Ellipsoid, Segment, check_radii
+from clothfem.body.lower_body import (
+    GaitEvent,
+    LowerBody,
+    SegmentEllipsoids,
+    SubjectParameters,
+    lower_body_from_c3d,
+    lower_body_from_markers,
+    lower_body_marker_map,
+    read_gait_events,
+    read_subject_parameters,
+)
 from clothfem.body.mocap import (
     UNIT_SCALE,
     MarkerRef,
@@ -43,14 +55,18 @@ __all__ = [
     "Body",
     "Ellipsoid",
     "FixedMotion",
+    "GaitEvent",
     "HingeMotion",
     "InterpolatedMotion",
+    "LowerBody",
     "MarkerRef",
     "MarkerSet",
     "Motion",
     "Pose",
     "Segment",
+    "SegmentEllipsoids",
     "SegmentFrames",
+    "SubjectParameters",
     "arm_flexion_body",
     "arm_marker_map",
     "body_from_markers",
@@ -58,8 +74,13 @@ __all__ = [
     "check_rotation",
     "eq27_frames",
     "joint_angle",
+    "lower_body_from_c3d",
+    "lower_body_from_markers",
+    "lower_body_marker_map",
     "lower_limb_marker_map",
     "read_c3d",
+    "read_gait_events",
+    "read_subject_parameters",
     "read_trc",
     "segment_frames",
     "segment_markers",
