@@ -601,13 +601,12 @@ def main(argv: list[str] | None = None) -> int:
     off = lb.ellipsoids["pelvis"].offset
     print(f"pelvis centre offset (e1, e2, e3) = ({', '.join(f'{1e3 * v:.1f}' for v in off)}) mm")
     worst = 0.0
-    for marker, a, b in LOWER_BODY_JOINTS:
+    for _marker, a, b in LOWER_BODY_JOINTS:
         j = lb.frames[b].j1
         for seg in (a, b):
             e = lb.ellipsoids[seg]
             y = np.einsum("fij,fi->fj", e.rotations, j - e.centres)
             worst = max(worst, float(np.max(np.sum((y / e.radii) ** 2, axis=1))))
-        del marker
     print(f"joint centres inside both neighbouring ellipsoids: max f + 1 = {worst:.3f} (< 1)")
     knee = knee_flexion(lb)
     t = lb.frames["L_thigh"].times
