@@ -45,6 +45,8 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("newton_iterations", "-", "Newton iterations in the row"),
     ("residual", "-", "static without a body: final residual norm of the load step"),
     ("stabilization_force", "N", "quasi-static: force of the viscous stabilization"),
+    ("min_yarn_strain", "-", "smallest Green strain along the yarns (-0.5: a crushed fold)"),
+    ("max_yarn_strain", "-", "largest Green strain along the yarns"),
     ("kinetic_energy", "J", "kinetic energy of the fabric"),
     ("strain_energy", "J", "strain energy of the fabric (with the stored friction energy)"),
     ("external_work", "J", "explicit: work of the loads (gravity) since the start"),

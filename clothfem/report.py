@@ -458,6 +458,27 @@ def _measures_lines(h: dict[str, np.ndarray], s: dict) -> list[str]:
     return lines
 
 
+CRUSHED = -0.2  # yarn Green strain (stretch 0.77) below which the report warns
+
+
+def _crush_lines(h: dict[str, np.ndarray]) -> list[str]:
+    """The yarn strain range of the run and, when some yarn was compressed below
+    :data:`CRUSHED`, a warning with the first angle where it happened."""
+    lo, hi = h.get("min_yarn_strain"), h.get("max_yarn_strain")
+    if lo is None or hi is None or lo.dtype.kind != "f" or not np.isfinite(lo).any():
+        return []
+    lines = [f"- yarn Green strain range: {np.nanmin(lo):.3g} to {np.nanmax(hi):.3g}"]
+    bad = np.flatnonzero(lo < CRUSHED)
+    if bad.size:
+        where = f"{h['angle_deg'][bad[0]]:.1f} deg" if "angle_deg" in h else f"row {bad[0] + 1}"
+        lines.append(
+            f"- warning: a yarn is compressed below E = {CRUSHED} (stretch < 0.77) from "
+            f"{where} on: a fold the mesh does not resolve (layers pressed together without "
+            "self-contact); results past there carry it"
+        )
+    return lines
+
+
 def report_markdown(run_dir: str | Path) -> str:
     """A short Markdown report of a run folder (status, torques at fixed angles, cost)."""
     run_dir = Path(run_dir)
@@ -518,6 +539,7 @@ def report_markdown(run_dir: str | Path) -> str:
             of = "of the wall time"
         lines.append(f"- time shares {of}: {shares}")
     lines += _measures_lines(h, s)
+    lines += _crush_lines(h)
     flex = torque_curve(h, "torque_flex") if "torque_flex" in h else None
     head = "| angle [deg] | torque_mag [N m] |" + (" -torque_flex [N m] |" if flex else "")
     lines += ["", head, "|---|---|" + ("---|" if flex else "")]

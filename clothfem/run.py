@@ -537,6 +537,13 @@ def run_scene(
                         "cutbacks": rec.cutbacks,
                         "newton_iterations": rec.newton_iterations,
                         "residual": rec.residual_final,
+                        **dict(
+                            zip(
+                                ("min_yarn_strain", "max_yarn_strain"),
+                                model.yarn_strain_range(),
+                                strict=True,
+                            )
+                        ),
                         "strain_energy": model.strain_energy(),
                         "dissipation_material": model.dissipated_material(),
                         "wall_time": now - clock["row"],

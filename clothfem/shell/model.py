@@ -21,6 +21,7 @@ is a ``fem.Constant`` and prescribed values are arrays updated in place.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -190,8 +191,10 @@ class ShellModel:
 
         self._build_directors()
         self._build_supports()
+        self.quadrature = quadrature
         self._build_forms(warp, quadrature)
         self._Rw_at: np.ndarray | None = None  # state at which self._Rw was assembled
+        self._yarn_strain: fem.Expression | None = None  # built on first use
         self._build_transfer()
         self.update_director()
 
@@ -738,6 +741,25 @@ class ShellModel:
     def strain_energy(self) -> float:
         """Internal strain energy [J] at the current state."""
         return self.comm.allreduce(fem.assemble_scalar(self._energy_form), op=MPI.SUM)
+
+    def yarn_strain_range(self) -> tuple[float, float]:
+        """Smallest and largest Green strain along the yarns (E11, E22 in the lamina frame)
+        over the points of the reduced membrane rule of every cell, at the current state
+        (collective). -0.5 is a yarn crushed to zero length: a fold the mesh does not resolve
+        (e.g. layers pressed together in a crease without self-contact)."""
+        if self._yarn_strain is None:
+            from ffcx.element_interface import create_quadrature
+
+            eps = self.strains[0]
+            points, _ = create_quadrature(
+                self.mesh.ufl_cell().cellname(), self.quadrature.reduced, "default"
+            )
+            self._yarn_strain = fem.Expression(ufl.as_vector([eps[0, 0], eps[1, 1]]), points)
+        n_cells = self.mesh.topology.index_map(2).size_local
+        e = self._yarn_strain.eval(np.arange(n_cells, dtype=np.int32))
+        lo = float(e.min()) if e.size else math.inf
+        hi = float(e.max()) if e.size else -math.inf
+        return self.comm.allreduce(lo, op=MPI.MIN), self.comm.allreduce(hi, op=MPI.MAX)
 
     def external_work(self) -> float:
         """Work of the conservative loads [J] at the current state and load factor."""

@@ -228,3 +228,24 @@ def test_missing_history_and_malformed_csv(tmp_path, capsys):
         assert main([cmd, str(bad)]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "missing required column 'angle_deg'" in err
+
+
+def test_report_warns_of_a_crushed_yarn(tmp_path, capsys):
+    """With the yarn strain columns, the report gives their range, and warns from the first
+    row whose smallest yarn strain is below report.CRUSHED (-0.2), naming its angle."""
+    d = _run(tmp_path / "run", columns=[*COLUMNS, "min_yarn_strain", "max_yarn_strain"])
+    with (d / "history.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    for i, r in enumerate(rows):  # the 7th row (25 deg) on: -0.3
+        r["min_yarn_strain"], r["max_yarn_strain"] = (-0.3 if i >= 6 else -0.01), 0.05
+    with (d / "history.csv").open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    assert main(["report", str(d)]) == 0
+    text = capsys.readouterr().out
+    assert "yarn Green strain range: -0.3 to 0.05" in text
+    assert "warning: a yarn is compressed below E = -0.2 (stretch < 0.77) from 25.0 deg on" in text
+    d2 = _run(tmp_path / "plain")
+    assert main(["report", str(d2)]) == 0
+    assert "yarn" not in capsys.readouterr().out
