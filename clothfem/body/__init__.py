@@ -8,10 +8,12 @@ body axes ``e1, e2, e3`` as columns; :class:`Ellipsoid` stores them as rows (``a
 Modules: :mod:`~clothfem.body.pose` (Pose, Motion), :mod:`~clothfem.body.ellipsoid`
 (Ellipsoid, Segment, Body), :mod:`~clothfem.body.motion` (Eq. 27, interpolated and analytic
 motions, joint angles), :mod:`~clothfem.body.mocap` (C3D/TRC, gap filling, marker maps),
-:mod:`~clothfem.body.lower_body` (pelvis, thighs, shanks and feet from a gait capture).
+:mod:`~clothfem.body.lower_body` (pelvis, thighs, shanks and feet from a gait capture),
+:mod:`~clothfem.body.gait_repeat` (a recorded gait cycle repeated, shifted by the stride).
 """
 
 from clothfem.body.ellipsoid import Body, Ellipsoid, Segment, check_radii
+from clothfem.body.gait_repeat import RepeatedGait, gait_cycle, repeat_cycle
 from clothfem.body.lower_body import (
     GaitEvent,
     LowerBody,
@@ -63,6 +65,7 @@ __all__ = [
     "MarkerSet",
     "Motion",
     "Pose",
+    "RepeatedGait",
     "Segment",
     "SegmentEllipsoids",
     "SegmentFrames",
@@ -73,6 +76,7 @@ __all__ = [
     "check_radii",
     "check_rotation",
     "eq27_frames",
+    "gait_cycle",
     "joint_angle",
     "lower_body_from_c3d",
     "lower_body_from_markers",
@@ -82,6 +86,7 @@ __all__ = [
     "read_gait_events",
     "read_subject_parameters",
     "read_trc",
+    "repeat_cycle",
     "segment_frames",
     "segment_markers",
     "validate_marker_map",
