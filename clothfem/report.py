@@ -472,9 +472,9 @@ def _crush_lines(h: dict[str, np.ndarray]) -> list[str]:
     if bad.size:
         where = f"{h['angle_deg'][bad[0]]:.1f} deg" if "angle_deg" in h else f"row {bad[0] + 1}"
         lines.append(
-            f"- warning: a yarn is compressed below E = {CRUSHED} (stretch < 0.77) from "
-            f"{where} on: a fold the mesh does not resolve (layers pressed together without "
-            "self-contact); results past there carry it"
+            f"- warning: a yarn is compressed below E = {CRUSHED} (stretch < 0.77) at some "
+            f"integration point from {where} on: a fold or an element membrane mode the mesh "
+            "does not resolve (docs/shell_element.md); results past there carry it"
         )
     return lines
 

@@ -744,15 +744,17 @@ class ShellModel:
 
     def yarn_strain_range(self) -> tuple[float, float]:
         """Smallest and largest Green strain along the yarns (E11, E22 in the lamina frame)
-        over the points of the reduced membrane rule of every cell, at the current state
-        (collective). -0.5 is a yarn crushed to zero length: a fold the mesh does not resolve
-        (e.g. layers pressed together in a crease without self-contact)."""
+        over the points of the full membrane rule of every cell, at the current state
+        (collective). -0.5 is a yarn crushed to zero length. Where these extremes are far
+        beyond the strains at the reduced rule's points, the displacement field carries a
+        membrane mode that the reduced rule does not see and the PSRI weight alpha (of
+        order t^2 / h^2) hardly resists (docs/shell_element.md)."""
         if self._yarn_strain is None:
             from ffcx.element_interface import create_quadrature
 
             eps = self.strains[0]
             points, _ = create_quadrature(
-                self.mesh.ufl_cell().cellname(), self.quadrature.reduced, "default"
+                self.mesh.ufl_cell().cellname(), self.quadrature.full, "default"
             )
             self._yarn_strain = fem.Expression(ufl.as_vector([eps[0, 0], eps[1, 1]]), points)
         n_cells = self.mesh.topology.index_map(2).size_local
