@@ -9,22 +9,11 @@ Modules: :mod:`~clothfem.body.pose` (Pose, Motion), :mod:`~clothfem.body.ellipso
 (Ellipsoid, Segment, Body), :mod:`~clothfem.body.motion` (Eq. 27, interpolated and analytic
 motions, joint angles), :mod:`~clothfem.body.mocap` (C3D/TRC, gap filling, marker maps),
 :mod:`~clothfem.body.lower_body` (pelvis, thighs, shanks and feet from a gait capture),
-:mod:`~clothfem.body.gait_repeat` (a recorded gait cycle repeated, shifted by the stride).
+:mod:`~clothfem.body.gait_repeat` (a recorded gait cycle repeated, shifted by the stride);
+import those two from their modules (each also runs as ``python -m``).
 """
 
 from clothfem.body.ellipsoid import Body, Ellipsoid, Segment, check_radii
-from clothfem.body.gait_repeat import RepeatedGait, gait_cycle, repeat_cycle
-from clothfem.body.lower_body import (
-    GaitEvent,
-    LowerBody,
-    SegmentEllipsoids,
-    SubjectParameters,
-    lower_body_from_c3d,
-    lower_body_from_markers,
-    lower_body_marker_map,
-    read_gait_events,
-    read_subject_parameters,
-)
 from clothfem.body.mocap import (
     UNIT_SCALE,
     MarkerRef,
@@ -57,36 +46,24 @@ __all__ = [
     "Body",
     "Ellipsoid",
     "FixedMotion",
-    "GaitEvent",
     "HingeMotion",
     "InterpolatedMotion",
-    "LowerBody",
     "MarkerRef",
     "MarkerSet",
     "Motion",
     "Pose",
-    "RepeatedGait",
     "Segment",
-    "SegmentEllipsoids",
     "SegmentFrames",
-    "SubjectParameters",
     "arm_flexion_body",
     "arm_marker_map",
     "body_from_markers",
     "check_radii",
     "check_rotation",
     "eq27_frames",
-    "gait_cycle",
     "joint_angle",
-    "lower_body_from_c3d",
-    "lower_body_from_markers",
-    "lower_body_marker_map",
     "lower_limb_marker_map",
     "read_c3d",
-    "read_gait_events",
-    "read_subject_parameters",
     "read_trc",
-    "repeat_cycle",
     "segment_frames",
     "segment_markers",
     "validate_marker_map",
