@@ -720,22 +720,12 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
     if not abs(mat["nu12"]) < limit:
         _fail("material.nu12", f"must be in (-{limit:.4g}, {limit:.4g}), got {mat['nu12']!r}")
     _validate_decrimping(data["material"], mat)
-    given = [k for k in VISCOSITY_KEYS if mat[k] is not None]
-    if given and len(given) < len(VISCOSITY_KEYS):
-        missing = next(k for k in VISCOSITY_KEYS if mat[k] is None)
-        _fail(
-            f"material.{missing}",
-            "required with the other material.viscosity* keys (all three or none)",
-        )
-    if given and not any(mat[k] > 0 for k in VISCOSITY_KEYS):
-        _fail("material.viscosity1", "one of viscosity1, viscosity2, viscosity12 must be > 0 Pa s")
-    given = [k for k in FRICTION_KEYS if mat[k] is not None]
-    if given and len(given) < len(FRICTION_KEYS):
-        missing = next(k for k in FRICTION_KEYS if mat[k] is None)
-        _fail(
-            f"material.{missing}",
-            "required with the other material.friction_* keys (all four or none)",
-        )
+    if _all_or_none(mat, VISCOSITY_KEYS, "material.viscosity* keys (all three or none)"):
+        if not any(mat[k] > 0 for k in VISCOSITY_KEYS):
+            _fail(
+                "material.viscosity1", "one of viscosity1, viscosity2, viscosity12 must be > 0 Pa s"
+            )
+    _all_or_none(mat, FRICTION_KEYS, "material.friction_* keys (all four or none)")
     if out["mesh"]["generator"] in ("cylinder", "pants") and out["mesh"]["n_around"] % 4:
         _fail(
             "mesh.n_around",
@@ -759,6 +749,16 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
     _validate_mocap(out, base=None if base is None else Path(base))
     _validate_duration(out)
     return out
+
+
+def _all_or_none(mat: dict[str, Any], keys: tuple[str, ...], what: str) -> bool:
+    """Fail naming the first missing key when some but not all ``keys`` of ``mat`` are given;
+    True when all are given."""
+    given = [k for k in keys if mat[k] is not None]
+    if given and len(given) < len(keys):
+        missing = next(k for k in keys if mat[k] is None)
+        _fail(f"material.{missing}", f"required with the other {what}")
+    return bool(given)
 
 
 def _validate_duration(out: dict[str, Any]) -> None:

@@ -41,6 +41,8 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
+from .point_history import PointHistory
+
 __all__ = [
     "COTTON_FRICTION",
     "DahlFriction",
@@ -120,7 +122,7 @@ def dahl_increment_energy(
     return ufl.conditional(ufl.ge(d, 0.0), up, down)
 
 
-class YarnFriction:
+class YarnFriction(PointHistory):
     """History and forms of :class:`DahlFriction` on a shell model (built by ShellModel).
 
     Per quadrature point of the reduced membrane rule (degree ``degree``, measure ``dx``):
@@ -134,6 +136,8 @@ class YarnFriction:
     cannot compile a form holding two Quadrature elements with different numbers of points:
     its element comparison calls numpy.allclose on point arrays of different shapes.)
     """
+
+    PREFIX = "friction"
 
     def __init__(
         self,
@@ -200,32 +204,6 @@ class YarnFriction:
             if diss.size:
                 lowest = min(lowest, float(diss.min()))
         return lowest
-
-    def state_arrays(self) -> dict[str, np.ndarray]:
-        """The history and the cumulated dissipation (local arrays, for a checkpoint)."""
-        return {
-            "friction_history": self.history.x.array.copy(),
-            "friction_dissipation": self.dissipation.x.array.copy(),
-        }
-
-    def restore_arrays(self, data: dict[str, np.ndarray]) -> None:
-        """Restore :meth:`state_arrays` of the same model and partition, before the model
-        assembles at a new state (it caches its residual by state, e.g. restore on the
-        freshly built model of a resumed run)."""
-        for name, f in (
-            ("friction_history", self.history),
-            ("friction_dissipation", self.dissipation),
-        ):
-            if data[name].shape != f.x.array.shape:
-                raise ValueError(
-                    f"{name} must have shape {f.x.array.shape} (same model and partition), "
-                    f"got {data[name].shape}"
-                )
-            f.x.array[:] = data[name]
-
-    def dissipated(self) -> float:
-        """Energy [J] dissipated by yarn friction since the start (collective)."""
-        return self.mesh.comm.allreduce(fem.assemble_scalar(self._dissipated_form), op=MPI.SUM)
 
     def stored(self) -> float:
         """Energy [J] stored in the friction springs at the last committed state."""

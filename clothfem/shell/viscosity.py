@@ -37,7 +37,8 @@ import dolfinx
 import numpy as np
 import ufl
 from dolfinx import fem
-from mpi4py import MPI
+
+from .point_history import PointHistory
 
 __all__ = ["FabricViscosity", "MembraneViscosity", "explicit_step_factor"]
 
@@ -84,12 +85,14 @@ def explicit_step_factor(
     return math.sqrt(1.0 + xi * xi) - xi
 
 
-class MembraneViscosity:
+class MembraneViscosity(PointHistory):
     """History and forms of :class:`FabricViscosity` on a shell model (built by ShellModel):
     the committed strains (E11, E22, E12) at the points of the reduced membrane rule
     (degree ``degree``, measure ``dx``), the cumulated dissipation density [J/m^3], the
     constant ``inv_h`` = 1 / time step [1/s] and ``energy``, the UFL potential added to the
     membrane term."""
+
+    PREFIX = "viscous"
 
     def __init__(
         self,
@@ -133,27 +136,3 @@ class MembraneViscosity:
         w = self.viscosity.weights()
         self.dissipation.x.array[dofs] += float(self.inv_h.value) * (d * d) @ w
         h[dofs] = e
-
-    def state_arrays(self) -> dict[str, np.ndarray]:
-        """The history and the cumulated dissipation (local arrays, for a checkpoint)."""
-        return {
-            "viscous_history": self.history.x.array.copy(),
-            "viscous_dissipation": self.dissipation.x.array.copy(),
-        }
-
-    def restore_arrays(self, data: dict[str, np.ndarray]) -> None:
-        """Restore :meth:`state_arrays` of the same model and partition."""
-        for name, f in (
-            ("viscous_history", self.history),
-            ("viscous_dissipation", self.dissipation),
-        ):
-            if data[name].shape != f.x.array.shape:
-                raise ValueError(
-                    f"{name} must have shape {f.x.array.shape} (same model and partition), "
-                    f"got {data[name].shape}"
-                )
-            f.x.array[:] = data[name]
-
-    def dissipated(self) -> float:
-        """Energy [J] dissipated by the viscosity since the start (collective)."""
-        return self.mesh.comm.allreduce(fem.assemble_scalar(self._dissipated_form), op=MPI.SUM)
