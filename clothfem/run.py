@@ -2,7 +2,7 @@
 
 The log says what was built (and what was left out because the scene does not need it).
 Scenes with ``[[body]]`` segments, and dynamic scenes, run the paths of
-:mod:`clothfem.scenes_arm` (settling, then the segment motions; its own outputs). Otherwise
+:mod:`clothfem.runners` (settling, then the segment motions; its own outputs). Otherwise
 results go to ``out``: ``fabric.xdmf`` (ParaView, meshio), ``history.csv`` (one row per
 accepted step, flushed at once), ``final.png``. SIGTERM and Ctrl-C stop the run cleanly:
 files are closed and every step already written is kept; a run killed outright leaves
@@ -29,8 +29,10 @@ import numpy as np
 from mpi4py import MPI
 
 from . import mesh as meshes
+from .errors import RunStopped
 from .io import Progress, ResultWriter, rank0_print, snapshot_png
 from .petsc_options import describe_direct_lu
+from .runners import _torque_segment, contact_log, run_contact_scene
 from .scene import DECRIMPING_KEYS, SceneError
 from .shell import (
     Clamp,
@@ -78,10 +80,6 @@ RUN_FILES = (
     "animation.gif",
 )
 CHECKPOINT_FILES = ("rank*-of-*.npz", "rank*-of-*.tmp")
-
-
-class RunStopped(RuntimeError):
-    """The run was interrupted (SIGTERM / Ctrl-C); results written so far are kept."""
 
 
 def _split_folder(out: Path) -> tuple[list[str], list[str]]:
@@ -378,8 +376,6 @@ def build_model(
         ),
     ]
     if scene["body"]:
-        from .scenes_arm import contact_log
-
         log += contact_log(scene)
     else:
         log += ["contact: not built (no body in the scene)", "friction: not built (no contact)"]
@@ -422,7 +418,6 @@ def _measures(scene: dict[str, Any], out: Path) -> dict[str, Any] | None:
     """The resistance measures of a body scene's history (:func:`report.resistance_measures`),
     keyed by the measured joint (the torque segment); None without a readable history."""
     from .report import ReportError, read_history, resistance_measures
-    from .scenes_arm import _torque_segment
 
     k = _torque_segment(scene)
     joint = scene["body"][k]["name"] if k is not None else "joint"
@@ -488,7 +483,6 @@ def run_scene(
 
     old = signal.signal(signal.SIGTERM, handler)
     if scene["body"] or s["integrator"] != "static":
-        from .scenes_arm import run_contact_scene
 
         def check_stop(where: str) -> None:
             if comm.allreduce(stop["signal"] is not None, op=MPI.LOR):

@@ -51,7 +51,7 @@ def test_rollup_same_on_two_ranks(tmp_path):
 
 _ONE_RANK_FAILS = """
 from mpi4py import MPI
-from clothfem.scenes_arm import _end_together
+from clothfem.runners import _end_together
 from clothfem.static import SolverDivergence
 comm = MPI.COMM_WORLD
 kind = {kind!r}

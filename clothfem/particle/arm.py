@@ -73,7 +73,7 @@ def _model(scene: dict, fabric_from: tuple[int, int] | None, bending: str, scene
     from clothfem import particle as pm
     from clothfem.contact.film import FilmParameters
     from clothfem.run import build_material, build_mesh
-    from clothfem.scenes_arm import _bodies_at, body_motions
+    from clothfem.runners import _bodies_at, body_motions
 
     from .sleeve import _classes
 
@@ -124,7 +124,7 @@ def run_arm(
     """One explicit particle run of the arm-sleeve scene on ``mesh`` (module docstring)."""
     from clothfem import particle as pm
     from clothfem.contact.forces import joint_torque
-    from clothfem.scenes_arm import _plan, body_motions
+    from clothfem.runners import _plan, body_motions
 
     t0 = time.perf_counter()
     scene = _scene(scene_path, mesh, angle, mu)

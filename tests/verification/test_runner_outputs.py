@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from clothfem import runners
 from clothfem import scene as scenes
-from clothfem import scenes_arm
 from clothfem.cli import main
 from clothfem.history import NAMES as HISTORY_NAMES
 from clothfem.history import UNITS_FILE
@@ -182,7 +182,7 @@ def test_failed_start_writes_nothing(tmp_path, capsys):
 def _run_keeping_checkpoints(scene, out: Path, keep: tuple[int, ...]) -> dict[int, Path]:
     """Run ``scene`` into ``out`` and copy the checkpoint folder after the checkpoints
     number ``keep`` (1-based) to ``out.parent / ck<k>``."""
-    original = scenes_arm._checkpoint
+    original = runners._checkpoint
     count, kept = {"k": 0}, {}
 
     def checkpoint(folder, comm, data):
@@ -195,11 +195,11 @@ def _run_keeping_checkpoints(scene, out: Path, keep: tuple[int, ...]) -> dict[in
             comm.barrier()
             kept[count["k"]] = dest
 
-    scenes_arm._checkpoint = checkpoint
+    runners._checkpoint = checkpoint
     try:
         run_scene(scene, out, comm=COMM)
     finally:
-        scenes_arm._checkpoint = original
+        runners._checkpoint = original
     return kept
 
 
@@ -445,7 +445,7 @@ def test_mocap_scene(tmp_path):
     sets = ["solver.settle_time=0.01", "solver.ramp_time=0.01", "solver.duration=0.03"]
     sets += ["mesh.n_around=8", "mesh.n_along=4", "output.png=false"]
     scene = scenes.load(ROOT / "demos" / "scenes" / "sleeve_mocap.toml", sets)
-    motions = scenes_arm.body_motions(scene)
+    motions = runners.body_motions(scene)
     e1 = [motions[1].pose(t).rotation[:, 0] for t in (0.0, 0.8)]
     assert np.degrees(np.arccos(np.clip(e1[0] @ e1[1], -1, 1))) > 60  # 27 -> 114 deg flexion
     out = run_scene(scene, base / "mocap", comm=COMM)

@@ -1,4 +1,5 @@
-"""Scenes with a body: quasi-static fabric-body contact driven by segment motions.
+"""The scene runners with a body (quasi-static, Newmark, explicit): fabric-body contact driven
+by segment motions.
 
 Used by :func:`clothfem.run.run_scene` when a scene has ``[[body]]`` segments (the arm-sleeve
 elbow-flexion scene of Man & Swan 2007, Sec. 4.1, is ``demos/scenes/arm_sleeve.toml``).
@@ -661,7 +662,7 @@ def _stop_with_fields(
 ) -> None:
     """``check_stop(where)``; when it stops the run, the fields at ``t`` (``fields()``: the
     functions to write besides the displacement) are written first unless they were."""
-    from .run import RunStopped
+    from .errors import RunStopped
 
     try:
         check_stop(where)
@@ -679,7 +680,7 @@ def _end_together(comm: MPI.Comm) -> None:
     would wait in their next collective call forever: under MPI it aborts the job instead
     (the history rows already written are kept)."""
     from .dynamics import DynamicsDivergence
-    from .run import RunStopped
+    from .errors import RunStopped
 
     exc = sys.exc_info()[1]
     shared = (SolverDivergence, ContactDivergence, DynamicsDivergence, RunStopped, SceneError)
