@@ -104,7 +104,7 @@ def _mocap_motions(scene: dict[str, Any]) -> dict[int, PlayedMotion]:
     """The motions of the ``type = "mocap"`` segments: each recording's window, moved by the
     rigid transform that puts the placing segment's Eq. 27 pose at the window start at its
     ``centre`` with axes (``axis``, ``up``), played from t = 0 (:func:`body_from_markers`)."""
-    from .scene import _read_motion
+    from .scene import _read_motion, repeated_markers
 
     segs = scene["body"]
     by_name = {seg["name"]: seg for seg in segs}
@@ -113,6 +113,8 @@ def _mocap_motions(scene: dict[str, Any]) -> dict[int, PlayedMotion]:
     def part(seg) -> MarkerSet:
         if seg["file"] not in files:
             files[seg["file"]] = _read_motion(Path(seg["file"]))
+        if seg["repeat"] > 1:  # the window as a gait cycle, repeated (times from 0)
+            return repeated_markers(seg, files[seg["file"]]).markers
         return _window(files[seg["file"]], seg["window"])
 
     def refs(seg) -> dict[str, Any]:
@@ -199,9 +201,15 @@ def contact_log(scene: dict[str, Any]) -> list[str]:
             segs.append(f"{seg['name']} fixed (radii {r} m)")
         elif seg["type"] == "mocap":
             w = seg["window"]
+            rep = (
+                f", a repeated cycle: {seg['repeat']} copies shifted by the stride of "
+                f"{'/'.join(seg['stride_markers'])}, blended over {seg['repeat_blend']:g} s"
+                if seg["repeat"] > 1
+                else ""
+            )
             segs.append(
-                f"{seg['name']} motion capture {Path(seg['file']).name} {w[0]:g}-{w[1]:g} s "
-                f"(placed by {seg['placed_by']}; radii {r} m)"
+                f"{seg['name']} motion capture {Path(seg['file']).name} {w[0]:g}-{w[1]:g} s"
+                f"{rep} (placed by {seg['placed_by']}; radii {r} m)"
             )
         else:
             segs.append(

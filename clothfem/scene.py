@@ -50,6 +50,7 @@ class Key:
         kinds = {
             "vec3": "3 numbers",
             "floats": "a list of numbers",
+            "strs": "a list of strings",
             "float": "a number",
             "int": "an integer",
             "str": "a string",
@@ -476,6 +477,22 @@ SCHEMA: dict[str, Section] = {
             "max_gap": Key(
                 "int", "mocap: longest marker gap filled by a spline [frames]", default=10, lo=0
             ),
+            "repeat": Key(
+                "int",
+                "mocap: play the window (one gait cycle: foot strike to foot strike of one foot) "
+                "this many times, each copy shifted by the stride and blended at the seams "
+                "(clothfem.body.gait_repeat; the log and summary say it is a repeated cycle)",
+                default=1,
+                lo=1,
+            ),
+            "repeat_blend": Key(
+                "float", "mocap, repeat > 1: half-width of the seam blend [s]", default=0.05, lo=0.0
+            ),
+            "stride_markers": Key(
+                "strs",
+                "mocap, repeat > 1: markers whose mean displacement over the cycle is the "
+                'stride (e.g. the hip centres ["LFEP", "RFEP"])',
+            ),
         },
         "rigid ellipsoid body segments (Man & Swan 2007, Sec. 3.3); a body turns contact on",
         many=True,
@@ -649,6 +666,9 @@ def _check_value(path: str, key: Key, value: Any) -> Any:
     elif key.kind == "marker":
         if not isinstance(value, str | dict):
             _fail(path, f"must be {key.describe()}, got {value!r}")
+    elif key.kind == "strs":
+        if not (isinstance(value, list) and value and all(isinstance(v, str) for v in value)):
+            _fail(path, f"must be a non-empty list of strings, got {value!r}")
     elif key.kind == "floats":
         if not (isinstance(value, list) and all(number(v) for v in value)):
             _fail(path, f"must be a list of numbers, got {value!r}")
@@ -789,7 +809,7 @@ def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
     cache: dict[Path, Any] = {}
     for i, seg in enumerate(body):
         if seg["type"] != "mocap":
-            for k in ("file", "j1", "j2", "m", "window", "placed_by"):
+            for k in ("file", "j1", "j2", "m", "window", "placed_by", "stride_markers"):
                 if seg[k] is not None:
                     _fail(f"body[{i}].{k}", "is a key of type = 'mocap' segments only")
             continue
@@ -803,6 +823,7 @@ def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
         for k in ("joint", "hinge_axis", "angle_max"):
             if seg[k] is not None:
                 _fail(f"{key}.{k}", "is a key of type = 'hinge' segments only")
+        _validate_repeat(seg, key)
         path = Path(seg["file"])
         if not path.is_absolute() and not path.is_file() and base is not None:
             path = base / path
@@ -843,6 +864,11 @@ def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
                 part.resolve(ref, max_gap=seg["max_gap"])
             except ValueError as exc:
                 _fail(f"{key}.{k}", str(exc))
+        if seg["repeat"] > 1:
+            try:
+                repeated_markers(seg, markers)
+            except ValueError as exc:
+                _fail(f"{key}.repeat", str(exc))
         placed = seg["placed_by"] or seg["name"]
         if placed not in names or body[names.index(placed)]["type"] != "mocap":
             _fail(f"{key}.placed_by", f"must name a mocap segment, one of {names}, got {placed!r}")
@@ -852,6 +878,30 @@ def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
                 f"required: segment {placed!r} places the recording",
             )
         seg["placed_by"] = placed
+
+
+def _validate_repeat(seg: dict[str, Any], key: str) -> None:
+    """The repetition keys of a mocap segment: stride markers with repeat > 1 only."""
+    if seg["repeat"] > 1 and seg["stride_markers"] is None:
+        _fail(f"{key}.stride_markers", "required with repeat > 1 (e.g. the hip centres)")
+    if seg["repeat"] == 1 and seg["stride_markers"] is not None:
+        _fail(f"{key}.stride_markers", "is a key of repeat > 1 only")
+
+
+def repeated_markers(seg: dict[str, Any], markers):
+    """:class:`clothfem.body.gait_repeat.RepeatedGait` of a validated mocap segment with
+    ``repeat > 1``: its window of ``markers`` played ``repeat`` times (times from 0)."""
+    from .body.gait_repeat import repeat_cycle
+
+    start, end = seg["window"]
+    return repeat_cycle(
+        markers,
+        start=start,
+        end=end,
+        copies=seg["repeat"],
+        blend=seg["repeat_blend"],
+        pelvis_markers=tuple(seg["stride_markers"]),
+    )
 
 
 def _validate_decrimping(given: dict[str, Any], mat: dict[str, Any]) -> None:
