@@ -489,6 +489,7 @@ def run_scene(
                 raise RunStopped(f"stopped by signal after {where}; results kept in {out}")
 
         summary: dict[str, Any] = {"scene": scene["scene"]["name"], "completed": False}
+        summary["built"] = log  # what the run built and left out (e.g. a repeated gait cycle)
         try:
             run_contact_scene(
                 scene,
