@@ -225,6 +225,32 @@ def roughness(angle: np.ndarray, torque: np.ndarray, *, lo: float = 2.0, hi: flo
     return float(np.sqrt(np.mean(np.diff(t) ** 2)) / t.mean())
 
 
+def roughness_split(
+    angle: np.ndarray,
+    torque: np.ndarray,
+    *,
+    window: float = 2.0,
+    lo: float = 2.0,
+    hi: float = 20.0,
+) -> tuple[float, float]:
+    """The roughness of a history split into the curve's own changes and the oscillation
+    about it, over [lo, hi] deg: (the :func:`roughness` of the centred :func:`moving_average`
+    over ``window`` deg, sampled at the rows; the rms of the rows about that average / the
+    mean torque). A curve with physical events (a slip, a wrap) has the first; ringing,
+    impacts and row sampling give the second. nan as for :func:`roughness`."""
+    a, t = np.asarray(angle, float), np.asarray(torque, float)
+    ok = np.isfinite(a) & np.isfinite(t)
+    a, t = a[ok], t[ok]
+    if a.size < 2:
+        return math.nan, math.nan
+    smooth = moving_average(a, t, window)
+    sel = (a >= lo - _ATOL) & (a <= hi + _ATOL)
+    if sel.sum() < 2 or t[sel].mean() == 0.0:
+        return math.nan, math.nan
+    osc = float(np.sqrt(np.mean((t[sel] - smooth[sel]) ** 2)) / t[sel].mean())
+    return roughness(a, smooth, lo=lo, hi=hi) * float(smooth[sel].mean() / t[sel].mean()), osc
+
+
 def roughness_trend(
     angle: np.ndarray, torque: np.ndarray, *, lo: float = 2.0, hi: float = 20.0
 ) -> float:
@@ -307,7 +333,9 @@ def resistance_measures(h: dict[str, np.ndarray], *, joint: str = "joint") -> di
       -tau . hinge axis (``flex``) over the history rows [N m] (rows of an explicit run are
       means over their steps), the mean time-averaged; ``roughness`` of the flexion's
       |tau| over 2-20 deg (:func:`roughness`) and the part a straight trend gives
-      (``roughness_trend``, :func:`roughness_trend`).
+      (``roughness_trend``, :func:`roughness_trend`); the same split into the 2-deg averaged
+      curve's own changes (``roughness_smoothed``) and the oscillation about it
+      (``oscillation``, :func:`roughness_split`).
     Missing columns give None.
     """
 
@@ -346,6 +374,11 @@ def resistance_measures(h: dict[str, np.ndarray], *, joint: str = "joint") -> di
     rt = roughness_trend(h["angle_deg"][on], h["torque_mag"][on]) if on.any() else math.nan
     torque["flexion"]["roughness"] = r if math.isfinite(r) else None
     torque["flexion"]["roughness_trend"] = rt if math.isfinite(rt) else None
+    rs, osc = (
+        roughness_split(h["angle_deg"][on], h["torque_mag"][on]) if on.any() else (math.nan,) * 2
+    )
+    torque["flexion"]["roughness_smoothed"] = rs if math.isfinite(rs) else None
+    torque["flexion"]["oscillation"] = osc if math.isfinite(osc) else None
     return {
         "joints": {joint: {"work": work, "work_flexion": work_flex}},
         "dissipation": {
@@ -455,6 +488,13 @@ def _measures_lines(h: dict[str, np.ndarray], s: dict) -> list[str]:
             f"- torque roughness over 2-20 deg (rms row-to-row / mean): {100 * r:.1f} %"
             + (f" (a straight trend alone: {100 * rt:.1f} %)" if rt is not None else "")
         )
+        rs = m["torque"]["flexion"].get("roughness_smoothed")
+        osc = m["torque"]["flexion"].get("oscillation")
+        if rs is not None and osc is not None:
+            lines.append(
+                f"- split: roughness of the 2-deg averaged curve {100 * rs:.1f} %, "
+                f"oscillation about it (rms / mean) {100 * osc:.1f} %"
+            )
     return lines
 
 

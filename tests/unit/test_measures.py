@@ -170,3 +170,20 @@ def test_hinge_smooth_start_angle_and_rate():
         assert step.angle(x) == om * min(max(x, 0.0), amax / om)
     with pytest.raises(ValueError, match="t_ramp"):
         HingeMotion(omega=om, angle_max=0.01, t_ramp=tr, **kw)
+
+
+def test_roughness_split_of_a_trend_plus_alternation():
+    """tau_k = m + s k + A (-1)^k on rows 0.5 deg apart (0-30 deg): the piecewise-linear
+    interpolant of the alternation is a triangle wave of period 1 deg, whose mean over a
+    2-deg window is exactly 0, and the centred average keeps the line; so over 2-20 deg
+    the averaged curve's roughness is the trend's s / mean and the oscillation about it
+    is A / mean (closed forms, 1e-12)."""
+    angle = np.arange(0.0, 30.0, 0.5)
+    k = np.arange(angle.size)
+    m, s, amp = 0.1, 0.001, 0.004
+    tau = m + s * k + amp * (-1.0) ** k
+    sel = (angle >= 2.0) & (angle <= 20.0)
+    smooth_r, osc = R.roughness_split(angle, tau)
+    assert smooth_r == pytest.approx(s / tau[sel].mean(), rel=1e-12)
+    assert osc == pytest.approx(amp / tau[sel].mean(), rel=1e-12)
+    assert all(math.isnan(v) for v in R.roughness_split(angle[:1], tau[:1]))
