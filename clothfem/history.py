@@ -11,7 +11,7 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
-__all__ = ["COLUMNS", "UNITS_FILE", "write_units", "check_row"]
+__all__ = ["COLUMNS", "UNITS_FILE", "write_units", "check_row", "yarn_strain_columns"]
 
 UNITS_FILE = "history_columns.csv"
 
@@ -78,3 +78,10 @@ def write_units(folder: str | Path) -> Path:
         w.writerow(["column", "unit", "meaning"])
         w.writerows(COLUMNS)
     return path
+
+
+def yarn_strain_columns(model) -> dict[str, float]:
+    """The ``min_yarn_strain`` / ``max_yarn_strain`` columns of a
+    :class:`clothfem.shell.ShellModel` at its current state (collective)."""
+    lo, hi = model.yarn_strain_range()
+    return {"min_yarn_strain": lo, "max_yarn_strain": hi}

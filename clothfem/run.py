@@ -30,6 +30,7 @@ from mpi4py import MPI
 
 from . import mesh as meshes
 from .errors import RunStopped
+from .history import yarn_strain_columns
 from .io import Progress, ResultWriter, rank0_print, snapshot_png
 from .petsc_options import describe_direct_lu
 from .runners import _torque_segment, contact_log, run_contact_scene
@@ -532,13 +533,7 @@ def run_scene(
                         "cutbacks": rec.cutbacks,
                         "newton_iterations": rec.newton_iterations,
                         "residual": rec.residual_final,
-                        **dict(
-                            zip(
-                                ("min_yarn_strain", "max_yarn_strain"),
-                                model.yarn_strain_range(),
-                                strict=True,
-                            )
-                        ),
+                        **yarn_strain_columns(model),
                         "strain_energy": model.strain_energy(),
                         "dissipation_material": model.dissipated_material(),
                         "wall_time": now - clock["row"],

@@ -54,6 +54,7 @@ from mpi4py import MPI
 from .body import FixedMotion, HingeMotion, MarkerSet, Pose, body_from_markers, segment_frames
 from .contact.forces import joint_torque
 from .contact.lagrange import ContactDivergence, LagrangeContact, LagrangeContactParameters
+from .history import yarn_strain_columns
 from .io import Progress, ResultWriter, animate_series, rank0_print, snapshot_png
 from .report import joint_power, joint_work
 from .scene import SceneError
@@ -380,12 +381,6 @@ def _torque_columns(tau: np.ndarray, res: np.ndarray, hinge_axis: np.ndarray) ->
     }
 
 
-def _yarn_columns(model: ShellModel) -> dict[str, float]:
-    """History columns of the yarn strain range at the current state (collective)."""
-    lo, hi = model.yarn_strain_range()
-    return {"min_yarn_strain": lo, "max_yarn_strain": hi}
-
-
 def _ellipsoid_meshes(bodies, *, scale: float = 0.985) -> list:
     """pyvista surfaces of ellipsoids given as (centre, axes as columns, radii), drawn with
     the radii x ``scale``: contact holds the fabric's nodes on the surface and the flat facets
@@ -560,7 +555,7 @@ def run_contact_scene(
                 "substeps": len(recs),
                 "active_set_iterations": sum(r.active_set_iterations for r in recs),
                 "newton_iterations": sum(r.newton_iterations for r in recs),
-                **_yarn_columns(model),
+                **yarn_strain_columns(model),
                 "joint_work": joint_work_at(stage, t),
                 "dissipation_total": contact.dissipation_total,
                 "dissipation_material": model.dissipated_material(),
@@ -974,7 +969,7 @@ def _run_dynamic(
                 "cutbacks": r.cutbacks,
                 "active_set_iterations": cr.active_set_iterations,
                 "newton_iterations": cr.newton_iterations,
-                **_yarn_columns(model),
+                **yarn_strain_columns(model),
                 "kinetic_energy": r.kinetic_energy,
                 "strain_energy": r.strain_energy,
                 "joint_work": state["work"],
@@ -1266,7 +1261,7 @@ def _run_explicit(
                 "n_stick": h.n_stick,
                 "n_slip": h.active - h.n_stick,
                 "substeps": k,
-                **_yarn_columns(model),
+                **yarn_strain_columns(model),
                 "kinetic_energy": r.kinetic,
                 "strain_energy": r.strain,
                 "external_work": r.external_work,

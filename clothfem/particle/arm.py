@@ -75,7 +75,7 @@ def _model(scene: dict, fabric_from: tuple[int, int] | None, bending: str, scene
     from clothfem.run import build_material, build_mesh
     from clothfem.runners import _bodies_at, body_motions
 
-    from .sleeve import _classes
+    from .sleeve import _transfer
 
     mat = scene["material"]
     rule = pm.SpringRule(bending=bending, warp=tuple(mat["warp"]))
@@ -89,14 +89,7 @@ def _model(scene: dict, fabric_from: tuple[int, int] | None, bending: str, scene
 
     net, fab = fabric_of(scene)
     if fabric_from is not None:  # the spring constants of another mesh, class by class
-        snet, sfab = fabric_of(_scene(scene_path, fabric_from, None, None))
-        k = fab.stiffness.copy()
-        cls, scls = _classes(net), _classes(snet)
-        for c in np.unique(cls):
-            k[cls == c] = np.median(sfab.stiffness[scls == c])
-        from dataclasses import replace
-
-        fab = replace(fab, stiffness=k)
+        fab = _transfer(fab, net, fabric_of(_scene(scene_path, fabric_from, None, None)))
     (g,) = [ld["acceleration"] for ld in scene["loads"] if ld["type"] == "gravity"]
     bodies_at = _bodies_at(scene, body_motions(scene))
     params = FilmParameters(mu=scene["contact"]["mu"], kernel=scene["contact"]["kernel"])

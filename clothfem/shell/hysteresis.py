@@ -149,18 +149,19 @@ class YarnFriction(PointHistory):
         degree: int,
         dx: ufl.Measure,
     ) -> None:
-        self.mesh, self.friction, self.t = mesh, friction, t
+        self.friction, self.t = friction, t
         self.k = fem.Constant(mesh, friction.parameters())
-        cell = mesh.ufl_cell()
-        from ffcx.element_interface import create_quadrature
-
-        He = ufl.VectorElement("Quadrature", cell, degree, dim=4, quad_scheme="default")
-        De = ufl.FiniteElement("Quadrature", cell, degree, quad_scheme="default")
-        self.history = H = fem.Function(fem.FunctionSpace(mesh, He), name="yarn_friction")
-        self.dissipation = D = fem.Function(fem.FunctionSpace(mesh, De), name="yarn_dissipation")
-        points, _ = create_quadrature(cell.cellname(), degree, "default")
-        self._strain = fem.Expression(ufl.as_vector([eps[0, 0], eps[1, 1]]), points)
-        self._nq = len(points)
+        strains = ufl.as_vector([eps[0, 0], eps[1, 1]])
+        self._build(
+            mesh,
+            degree=degree,
+            dim=4,
+            strains=strains,
+            t=t,
+            dx=dx,
+            names=("yarn_friction", "yarn_dissipation"),
+        )
+        H = self.history
         dens = 0
         psi = 0
         for i in range(2):
@@ -168,7 +169,6 @@ class YarnFriction(PointHistory):
             dens += dahl_increment_energy(eps[i, i] - H[i], H[2 + i], k, S)
             psi += H[2 + i] ** 2 / (2.0 * k)
         self.energy = t * (dens + psi) * dx
-        self._dissipated_form = fem.form(t * D * dx)
         self._stored_form = fem.form(t * psi * dx)
         self.last_min_dissipation = 0.0
 
@@ -187,12 +187,8 @@ class YarnFriction(PointHistory):
         row); returns this rank's smallest dissipation density [J/m^3] of the step."""
         par = self.friction.parameters()
         lowest = math.inf
-        imap = self.mesh.topology.index_map(2)
-        n_cells = imap.size_local + imap.num_ghosts
-        cells = np.arange(n_cells, dtype=np.int32)
-        H, D, nq = self.history, self.dissipation, self._nq
-        e = self._strain.eval(cells).reshape(n_cells, nq, 2)
-        dofs = D.function_space.dofmap.list.array.reshape(n_cells, nq)
+        e, dofs = self._point_strains()
+        H, D = self.history, self.dissipation
         h = H.x.array.reshape(-1, 4)
         for i in range(2):
             s_new, _, diss = dahl_update(

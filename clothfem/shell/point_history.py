@@ -1,14 +1,17 @@
 """Material history at quadrature points: the part yarn friction and membrane viscosity share.
 
-A subclass sets ``self.mesh``, ``self.history`` (the committed state at the points of the
-reduced membrane rule), ``self.dissipation`` (the cumulated dissipation density [J/m^3] at
-the same points) and ``self._dissipated_form`` (``t D dx``), and the class attribute
-``PREFIX`` that names its arrays in checkpoints.
+A subclass calls :meth:`PointHistory._build` in its constructor (the history of ``dim``
+values and the cumulated dissipation density [J/m^3] at the points of the reduced membrane
+rule, the strains it follows, the dissipated-energy form), uses
+:meth:`PointHistory._point_strains` in its update, and sets the class attribute ``PREFIX``
+that names its arrays in checkpoints.
 """
 
 from __future__ import annotations
 
+import dolfinx
 import numpy as np
+import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
@@ -23,6 +26,43 @@ class PointHistory:
     history: fem.Function
     dissipation: fem.Function
     _dissipated_form: fem.FormMetaClass
+
+    def _build(
+        self,
+        mesh: dolfinx.mesh.Mesh,
+        *,
+        degree: int,
+        dim: int,
+        strains: ufl.core.expr.Expr,
+        t: fem.Constant,
+        dx: ufl.Measure,
+        names: tuple[str, str],
+    ) -> None:
+        """The Quadrature functions ``history`` (``dim`` values a point) and ``dissipation``
+        named ``names`` at the points of the rule of ``degree``, the expression of
+        ``strains`` at those points and the form of t D dx."""
+        from ffcx.element_interface import create_quadrature
+
+        cell = mesh.ufl_cell()
+        He = ufl.VectorElement("Quadrature", cell, degree, dim=dim, quad_scheme="default")
+        De = ufl.FiniteElement("Quadrature", cell, degree, quad_scheme="default")
+        self.mesh = mesh
+        self.history = fem.Function(fem.FunctionSpace(mesh, He), name=names[0])
+        self.dissipation = fem.Function(fem.FunctionSpace(mesh, De), name=names[1])
+        points, _ = create_quadrature(cell.cellname(), degree, "default")
+        self._strain = fem.Expression(strains, points)
+        self._nq = len(points)
+        self._dissipated_form = fem.form(t * self.dissipation * dx)
+
+    def _point_strains(self) -> tuple[np.ndarray, np.ndarray]:
+        """The strains at the points of every local cell (owned and ghost), shape (cells,
+        points, components), and the dofs of those points in ``history`` / ``dissipation``
+        (cells, points); no collective call."""
+        imap = self.mesh.topology.index_map(2)
+        n_cells = imap.size_local + imap.num_ghosts
+        e = self._strain.eval(np.arange(n_cells, dtype=np.int32)).reshape(n_cells, self._nq, -1)
+        dofs = self.dissipation.function_space.dofmap.list.array.reshape(n_cells, self._nq)
+        return e, dofs
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         """The history and the cumulated dissipation (local arrays, for a checkpoint)."""

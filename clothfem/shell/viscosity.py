@@ -104,33 +104,27 @@ class MembraneViscosity(PointHistory):
         degree: int,
         dx: ufl.Measure,
     ) -> None:
-        from ffcx.element_interface import create_quadrature
-
-        self.mesh, self.viscosity = mesh, viscosity
+        self.viscosity = viscosity
         self.inv_h = fem.Constant(mesh, 0.0)
         self.eta = fem.Constant(mesh, viscosity.weights())
-        cell = mesh.ufl_cell()
-        He = ufl.VectorElement("Quadrature", cell, degree, dim=3, quad_scheme="default")
-        De = ufl.FiniteElement("Quadrature", cell, degree, quad_scheme="default")
-        self.history = H = fem.Function(fem.FunctionSpace(mesh, He), name="membrane_strain")
-        self.dissipation = D = fem.Function(fem.FunctionSpace(mesh, De), name="viscous_dissipation")
-        points, _ = create_quadrature(cell.cellname(), degree, "default")
         strain = ufl.as_vector([eps[0, 0], eps[1, 1], eps[0, 1]])
-        self._strain = fem.Expression(strain, points)
-        self._nq = len(points)
+        self._build(
+            mesh,
+            degree=degree,
+            dim=3,
+            strains=strain,
+            t=t,
+            dx=dx,
+            names=("membrane_strain", "viscous_dissipation"),
+        )
+        H = self.history
         rate2 = sum(self.eta[i] * (strain[i] - H[i]) ** 2 for i in range(3))
         self.energy = 0.5 * t * self.inv_h * rate2 * dx
-        self._dissipated_form = fem.form(t * D * dx)
 
     def advance(self) -> None:
         """Add the step's dissipation eta (E - E_n)^2 / h at every point and make the current
         strains the history (no collective call)."""
-        imap = self.mesh.topology.index_map(2)
-        n_cells = imap.size_local + imap.num_ghosts
-        cells = np.arange(n_cells, dtype=np.int32)
-        nq = self._nq
-        e = self._strain.eval(cells).reshape(n_cells, nq, 3)
-        dofs = self.dissipation.function_space.dofmap.list.array.reshape(n_cells, nq)
+        e, dofs = self._point_strains()
         h = self.history.x.array.reshape(-1, 3)
         d = e - h[dofs]
         w = self.viscosity.weights()

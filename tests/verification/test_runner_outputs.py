@@ -305,6 +305,16 @@ def _cli(out: Path, scene: Path, *args: str) -> list[str]:
     return [sys.executable, "-m", "clothfem.cli", "run", str(scene), "--out", str(out), *args]
 
 
+def _signal_after_lines(proc: subprocess.Popen, path: Path, lines: int, sig: int) -> None:
+    """Send ``sig`` to ``proc`` once ``path`` holds ``lines`` lines (within 300 s)."""
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and proc.poll() is None:
+        if path.exists() and path.read_text().count("\n") >= lines:
+            proc.send_signal(sig)
+            return
+        time.sleep(0.02)
+
+
 @pytest.mark.serial
 @pytest.mark.skipif(COMM.size > 1, reason="launches its own process")
 def test_sigkill_leaves_readable_files_and_resume_continues(tmp_path):
@@ -316,13 +326,7 @@ def test_sigkill_leaves_readable_files_and_resume_continues(tmp_path):
     proc = subprocess.Popen(
         _cli(out, CI, *sets), env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
     )
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and proc.poll() is None:
-        path = out / "history.csv"
-        if path.exists() and path.read_text().count("\n") >= 10:
-            proc.send_signal(signal.SIGKILL)
-            break
-        time.sleep(0.02)
+    _signal_after_lines(proc, out / "history.csv", 10, signal.SIGKILL)
     proc.wait(timeout=60)
     assert proc.returncode == -signal.SIGKILL
     rows = _rows(out)
@@ -352,13 +356,7 @@ def test_sigterm_writes_the_state_it_stops_at(tmp_path):
     proc = subprocess.Popen(
         _cli(out, CI, *args), env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
     )
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and proc.poll() is None:
-        path = out / "history.csv"
-        if path.exists() and path.read_text().count("\n") >= 4:
-            proc.send_signal(signal.SIGTERM)
-            break
-        time.sleep(0.02)
+    _signal_after_lines(proc, out / "history.csv", 4, signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err.decode()[-2000:]
     times, fields = _series(out)
