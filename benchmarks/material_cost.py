@@ -18,6 +18,7 @@ import argparse
 import time
 
 import numpy as np
+from _arm_common import parse_mesh
 from mpi4py import MPI
 
 from clothfem import mesh as meshes
@@ -48,14 +49,21 @@ def material(table: dict) -> object:
     return build_material(scenes.validate(data)["material"])
 
 
+def _positive(text: str) -> int:
+    """An integer >= 1 (argparse type)."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
+    return int(text)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--mesh", default="24x30", help="n_around x n_along")
-    parser.add_argument("--calls", type=int, default=200, help="steps per model and round")
-    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--mesh", type=parse_mesh, default=(24, 30), help="NAxNL, e.g. 24x30")
+    parser.add_argument("--calls", type=_positive, default=200, help="steps per model and round")
+    parser.add_argument("--rounds", type=_positive, default=5)
     parser.add_argument("--step-ms", type=float, default=None, help="rest of a step [ms]")
     args = parser.parse_args()
-    na, nl = (int(v) for v in args.mesh.split("x"))
+    na, nl = args.mesh
     comm = MPI.COMM_WORLD
     sleeve = meshes.cylinder(comm, radius=0.06, length=0.5, n_around=na, n_along=nl)
     models = {
@@ -89,7 +97,7 @@ def main() -> None:
     med = {name: float(np.median(v)) for name, v in times.items()}
     base = med["linear"]
     rank0_print(
-        f"sleeve {args.mesh} ({na * nl} cells), {comm.size} rank(s), {args.rounds} rounds of "
+        f"sleeve {na}x{nl} ({na * nl} cells), {comm.size} rank(s), {args.rounds} rounds of "
         f"{args.calls} steps; median CPU ms per force assembly + commit:"
     )
     for name, v in med.items():

@@ -30,11 +30,14 @@ from __future__ import annotations
 import argparse
 import csv
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
+
+from clothfem.scene import SceneError
 
 __all__ = ["ArmRun", "run_arm"]
 
@@ -113,8 +116,11 @@ def run_arm(
     bending: str = "provot",
     constants_from: tuple[int, int] | None = None,
     safety: float = 0.9,
+    on_row: Callable[[tuple[float, float, float, float, int]], None] | None = None,
 ) -> ArmRun:
-    """One explicit particle run of the arm-sleeve scene on ``mesh`` (module docstring)."""
+    """One explicit particle run of the arm-sleeve scene on ``mesh`` (module docstring).
+    ``on_row(row)`` is called with every row (time [s], angle [deg], |tau| [N m],
+    tau . axis [N m], contact nodes) as it is made."""
     from clothfem import particle as pm
     from clothfem.contact.forces import joint_torque
     from clothfem.runners import _plan, body_motions
@@ -139,15 +145,16 @@ def run_arm(
         k += 1
         if state.t >= row_end - 1e-12 or state.t >= plan.t_end - 1e-12:
             tau = acc / k
-            rows.append(
-                (
-                    state.t,
-                    plan.angle_at(state.t),
-                    float(np.linalg.norm(tau)),
-                    float(tau @ plan.hinge_axis),
-                    info.active,
-                )
+            row = (
+                state.t,
+                plan.angle_at(state.t),
+                float(np.linalg.norm(tau)),
+                float(tau @ plan.hinge_axis),
+                info.active,
             )
+            rows.append(row)
+            if on_row is not None:
+                on_row(row)
             acc, k, row_end = np.zeros(3), 0, row_end + interval
         if not np.all(np.isfinite(state.x)):
             raise FloatingPointError(f"particle arm run blew up at t = {state.t:.6g} s")
@@ -159,14 +166,36 @@ def run_arm(
     )  # fmt: skip
 
 
-def _write(run: ArmRun, path: Path, t_settle: float) -> None:
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["stage", "time", "angle_deg", "torque_mag", "torque_flex", "n_active"])
-        for i in range(len(run.time)):
-            stage = "settle" if run.time[i] <= t_settle + 1e-12 else "motion"
-            values = (run.time[i], run.angle[i], run.torque_mag[i], run.torque_flex[i])
-            w.writerow([stage, *values, run.active[i]])
+class _RowFile:
+    """The CSV of one mesh's rows, written and flushed as they come (a run that stops keeps
+    the rows made so far; nothing on ranks other than 0)."""
+
+    def __init__(self, path: Path, t_settle: float) -> None:
+        self.t_settle = t_settle
+        self.fh = path.open("w", newline="") if MPI.COMM_WORLD.rank == 0 else None
+        if self.fh is not None:
+            self.writer = csv.writer(self.fh)
+            self.writer.writerow(
+                ["stage", "time", "angle_deg", "torque_mag", "torque_flex", "n_active"]
+            )
+
+    def __call__(self, row: tuple[float, float, float, float, int]) -> None:
+        if self.fh is not None:
+            stage = "settle" if row[0] <= self.t_settle + 1e-12 else "motion"
+            self.writer.writerow([stage, *row])
+            self.fh.flush()
+
+    def close(self) -> None:
+        if self.fh is not None:
+            self.fh.close()
+
+
+def _mesh_arg(text: str) -> tuple[int, int]:
+    """``NAROUNDxNALONG`` as two positive integers (argparse type)."""
+    parts = text.split("x")
+    if len(parts) != 2 or not all(p.isdigit() and int(p) > 0 for p in parts):
+        raise argparse.ArgumentTypeError(f"must be NAROUNDxNALONG, e.g. 16x20, got {text!r}")
+    return int(parts[0]), int(parts[1])
 
 
 def main() -> None:
@@ -174,35 +203,45 @@ def main() -> None:
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", default="demos/scenes/arm_sleeve.toml")
-    parser.add_argument("--mesh", nargs="+", default=["8x10", "16x20"], help="NAROUNDxNALONG")
+    parser.add_argument(
+        "--mesh", nargs="+", type=_mesh_arg, default=[(8, 10), (16, 20)], help="NAROUNDxNALONG"
+    )
     parser.add_argument("--angle", type=float, default=20.0, help="flexion [deg]")
     parser.add_argument("--mu", type=float, default=None, help="contact mu (scene's if unset)")
     parser.add_argument("--bending", default="provot", choices=("provot", "choi-ko"))
-    parser.add_argument("--constants-from", default=None, help="NAROUNDxNALONG: keep its k")
+    parser.add_argument(
+        "--constants-from", type=_mesh_arg, default=None, help="NAROUNDxNALONG: keep its k"
+    )
     parser.add_argument("--out", default="results/particle-arm")
     args = parser.parse_args()
     out = Path(args.out)
-    src = None
-    if args.constants_from:
-        src = tuple(int(v) for v in args.constants_from.split("x"))
+    try:
+        settles = [
+            _scene(args.scene, m, args.angle, args.mu)["solver"]["settle_time"] for m in args.mesh
+        ]
+    except SceneError as exc:  # before anything is written
+        _print(f"clothfem.particle.arm: {exc}")
+        raise SystemExit(2) from None
     if MPI.COMM_WORLD.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
     head = " | ".join(f"{a:g} deg" for a in ANGLES)
     _print(f"| mesh | constants | steps | dt [s] | s | \\|tau\\| at {head} [N m] |")
-    for m in args.mesh:
-        mesh = tuple(int(v) for v in m.split("x"))
-        run = run_arm(
-            scene_path=args.scene, mesh=mesh, angle=args.angle, mu=args.mu,
-            bending=args.bending, constants_from=src,
-        )  # fmt: skip
-        settle = _scene(args.scene, mesh, None, None)["solver"]["settle_time"]
-        if MPI.COMM_WORLD.rank == 0:
-            _write(run, out / f"particle_{m}.csv", settle)
+    src = args.constants_from
+    const = "rule" if src is None else f"{src[0]}x{src[1]}"
+    for mesh, settle in zip(args.mesh, settles, strict=True):
+        name = f"{mesh[0]}x{mesh[1]}"
+        rows = _RowFile(out / f"particle_{name}.csv", settle)
+        try:
+            run = run_arm(
+                scene_path=args.scene, mesh=mesh, angle=args.angle, mu=args.mu,
+                bending=args.bending, constants_from=args.constants_from, on_row=rows,
+            )  # fmt: skip
+        finally:
+            rows.close()
         motion = run.time > settle
         taus = [torque_at(run.angle[motion], run.torque_mag[motion], a) for a in ANGLES]
         cells = " | ".join("-" if t is None else f"{t:.4f}" for t in taus)
-        const = args.constants_from or "rule"
-        _print(f"| {m} | {const} | {run.steps} | {run.dt:.3e} | {run.seconds:.0f} | {cells} |")
+        _print(f"| {name} | {const} | {run.steps} | {run.dt:.3e} | {run.seconds:.0f} | {cells} |")
 
 
 def _print(line: str) -> None:
