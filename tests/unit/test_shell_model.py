@@ -257,3 +257,18 @@ def test_bending_patch_test():
     errs = [_bending_patch_error(n, True) for n in (3, 6, 12)]
     orders = [math.log2(a / b) for a, b in zip(errs, errs[1:], strict=False)]
     assert min(orders) > 2.3 and errs[-1] < 1e-3, (errs, orders)
+
+
+def test_yarn_strain_range_of_a_homogeneous_stretch():
+    """u = G X with G = diag(a, b, 0) on a flat patch (warp along x): the Green strains
+    along the yarns are E11 = a + a^2 / 2 and E22 = b + b^2 / 2 at every point, so the range
+    is (min, max) of the two (closed form, 1e-12; also on 2 ranks)."""
+    sm = meshes.strip(COMM, length=1.0, width=0.5, nx=3, ny=2)
+    model = ShellModel(sm, material=MAT, thickness=0.01)
+    a, b = 0.02, -0.05
+    u = model.u.x.array.reshape(-1, 3)
+    u[:] = model.x_nodes * np.array([a, b, 0.0])
+    model.update_director()
+    lo, hi = model.yarn_strain_range()
+    assert lo == pytest.approx(b + b * b / 2, rel=1e-12)
+    assert hi == pytest.approx(a + a * a / 2, rel=1e-12)
