@@ -33,7 +33,7 @@ from .errors import RunStopped
 from .history import yarn_strain_columns
 from .io import Progress, ResultWriter, rank0_print, snapshot_png
 from .petsc_options import describe_direct_lu
-from .runners import _torque_segment, contact_log, run_contact_scene
+from .runners import contact_log, run_contact_scene
 from .scene import DECRIMPING_KEYS, SceneError
 from .shell import (
     Clamp,
@@ -53,6 +53,7 @@ from .shell import (
     Symmetry,
 )
 from .static import LoadStepping, solve_static
+from .torque_measure import torque_segment_index
 
 __all__ = [
     "RUN_FILES",
@@ -420,7 +421,7 @@ def _measures(scene: dict[str, Any], out: Path) -> dict[str, Any] | None:
     keyed by the measured joint (the torque segment); None without a readable history."""
     from .report import ReportError, read_history, resistance_measures
 
-    k = _torque_segment(scene)
+    k = torque_segment_index(scene)
     joint = scene["body"][k]["name"] if k is not None else "joint"
     try:
         h = read_history(out / "history.csv")

@@ -42,7 +42,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -60,6 +60,7 @@ from .report import joint_power, joint_work
 from .scene import SceneError
 from .shell import ShellModel
 from .static import SolverDivergence
+from .torque_measure import TorqueMeasure, torque_measure, torque_segment_index
 
 __all__ = ["body_motions", "contact_log", "run_contact_scene", "torque_centre"]
 
@@ -77,10 +78,19 @@ def _frame(axis, up) -> np.ndarray:
 @dataclass(frozen=True)
 class PlayedMotion:
     """A recorded segment motion (``motion``, an :class:`InterpolatedMotion` whose times start
-    at 0 at the window start) played until ``t_end`` [s], then at rest in its last pose."""
+    at 0 at the window start) played until ``t_end`` [s], then at rest in its last pose;
+    ``half_length`` [m] is half the mean J1-J2 distance of the recording (where the proximal
+    joint J1 sits on the segment's axis, :meth:`joint`)."""
 
     motion: Any
     t_end: float
+    half_length: float = 0.0
+
+    def joint(self, t: float) -> np.ndarray:
+        """The proximal joint J1 [m] at t [s], carried with the Eq. 27 frame:
+        ``c(t) - half_length e1(t)``."""
+        p = self.pose(t)
+        return p.centre - self.half_length * p.rotation[:, 0]
 
     def pose(self, t: float) -> Pose:
         if t >= self.t_end:
@@ -147,7 +157,9 @@ def _mocap_motions(scene: dict[str, Any]) -> dict[int, PlayedMotion]:
             max_gap=seg["max_gap"],
         )
         motion = body.segments[0].motion
-        out[i] = PlayedMotion(motion=motion, t_end=float(motion.times[-1]))
+        fr = segment_frames(moved, marker_map={seg["name"]: refs(seg)}, max_gap=seg["max_gap"])
+        half = 0.5 * float(np.mean(np.linalg.norm(fr[seg["name"]].j2 - fr[seg["name"]].j1, axis=1)))
+        out[i] = PlayedMotion(motion=motion, t_end=float(motion.times[-1]), half_length=half)
     return out
 
 
@@ -177,20 +189,85 @@ def body_motions(scene: dict[str, Any]) -> list[FixedMotion | HingeMotion | Play
     return out
 
 
-def _torque_segment(scene: dict[str, Any]) -> int | None:
-    c = scene["contact"]
-    for i, seg in enumerate(scene["body"]):
-        if seg["type"] == "hinge" and c["torque_segment"] in (None, seg["name"]):
-            return i
-    return None
+def recorded_events(scene: dict[str, Any]) -> list[tuple[float, str, str]]:
+    """The gait events (C3D ``EVENT`` group: foot strikes, foot offs) of the recordings the
+    mocap segments play, on the run's clock: ``(solver.settle_time + event time - first
+    played frame time + k T, context, label)`` [s], T the cycle of a repeated window (copy k),
+    sorted; events within half a frame of the window count (an event just before the first
+    played frame comes out just before it); an event on a seam is listed once. TRC files
+    carry no events."""
+    from .body.lower_body import read_gait_events
+    from .scene import _read_motion, repeated_markers
+
+    t_settle, seen, out, half = scene["solver"]["settle_time"], set(), set(), 0.0
+    for seg in scene["body"]:
+        key = (seg.get("file"), tuple(seg.get("window") or ()))
+        if seg["type"] != "mocap" or key in seen or Path(seg["file"]).suffix.lower() != ".c3d":
+            continue
+        seen.add(key)
+        markers = _read_motion(Path(seg["file"]))
+        first = _window(markers, seg["window"]).times
+        T = repeated_markers(seg, markers).cycle_time if seg["repeat"] > 1 else 0.0
+        half = 0.5 * float(np.median(np.diff(first)))  # events lie between frames
+        for e in read_gait_events(seg["file"]):
+            if not seg["window"][0] - half <= e.time <= seg["window"][1] + half:
+                continue
+            for k in range(seg["repeat"]):
+                t = round(t_settle + e.time - first[0] + k * T, 9)
+                out.add((t, e.context, e.label))
+    kept: list[tuple[float, str, str]] = []
+    for ev in sorted(out):  # a seam's event from both copies (within a frame): once
+        if not any(ev[1:] == k[1:] and ev[0] - k[0] < 2 * half for k in kept[-4:]):
+            kept.append(ev)
+    return kept
 
 
-def torque_centre(scene: dict[str, Any]) -> np.ndarray:
-    """Eq. 28 centre J in m: ``contact.torque_point`` or the torque segment's joint."""
+def _write_events(scene: dict[str, Any], out: Path, comm: MPI.Comm, summary: dict) -> list:
+    """``out/events.csv`` (time_s, context, label) of :func:`recorded_events` (rank 0), also
+    in ``summary["gait_events"]``; nothing without events."""
+    events = recorded_events(scene) if comm.rank == 0 else None
+    events = comm.bcast(events, root=0)
+    if events:
+        summary["gait_events"] = [{"time": t, "context": c, "label": lb} for t, c, lb in events]
+        if comm.rank == 0:
+            out.mkdir(parents=True, exist_ok=True)
+            with (out / "events.csv").open("w", newline="") as fh:
+                w = csv.writer(fh)
+                w.writerow(["time_s", "context", "label"])
+                w.writerows(events)
+    return events
+
+
+def _events(summary: dict[str, Any]) -> list[tuple[float, str, str]]:
+    """The gait events of ``summary`` (:func:`_write_events`) as (time, context, label)."""
+    return [(e["time"], e["context"], e["label"]) for e in summary.get("gait_events", ())]
+
+
+def torque_centre(scene: dict[str, Any]) -> np.ndarray | None:
+    """Eq. 28 centre J in m: ``contact.torque_point`` or the hinge torque segment's joint;
+    None for a recorded torque segment (J moves: :mod:`clothfem.torque_measure`)."""
     c = scene["contact"]
     if c["torque_point"] is not None:
         return np.asarray(c["torque_point"], dtype=float)
-    return np.asarray(scene["body"][_torque_segment(scene)]["joint"], dtype=float)
+    seg = scene["body"][torque_segment_index(scene)]
+    return np.asarray(seg["joint"], dtype=float) if seg["type"] == "hinge" else None
+
+
+def _torque_where(scene: dict[str, Any]) -> str:
+    """The log's words for J, AJ and the flexion axis of the Eq. 28 measure."""
+    c, body = scene["contact"], scene["body"]
+    k = torque_segment_index(scene)
+    J = torque_centre(scene)
+    where = (
+        f"J = {J.tolist()} m"
+        if J is not None
+        else f"the moving joint J1 of {body[k]['name']} (Eq. 27 frame), torque_flex about e3 "
+        f"of {c['flexion_frame'] or body[k]['name']}"
+    )
+    if c["aj"] == "all":
+        return f"{where} over AJ = all"
+    also = "" if not c["torque_with"] else f" and {', '.join(c['torque_with'])}"
+    return f"{where} over AJ = {c['aj']} of {body[k]['name']}{also}"
 
 
 def contact_log(scene: dict[str, Any]) -> list[str]:
@@ -218,9 +295,6 @@ def contact_log(scene: dict[str, Any]) -> list[str]:
                 f"{seg['angle_max']:g} deg (radii {r} m)"
             )
     c = scene["contact"]
-    k = _torque_segment(scene)
-    J = torque_centre(scene)
-    aj = c["aj"] if c["aj"] == "all" else f"{c['aj']} of {scene['body'][k]['name']}"
     integrator = scene["solver"]["integrator"]
     if integrator == "static":
         how = (
@@ -239,7 +313,7 @@ def contact_log(scene: dict[str, Any]) -> list[str]:
             else "(implicit Lagrange multipliers, active set), "
         )
         + how
-        + f"torque about J = {J.tolist()} m over AJ = {aj}",
+        + f"torque about {_torque_where(scene)}",
         (
             f"friction: Coulomb mu {c['mu']:g} "
             + ("(limits each step's tangential impulse)" if film else "(regularised return map)")
@@ -250,11 +324,12 @@ def contact_log(scene: dict[str, Any]) -> list[str]:
 
 
 def _aj_mask(scene: dict[str, Any], J: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
-    """Reference-coordinate node selector for the static AJ choices (None = all nodes)."""
+    """Reference-coordinate node selector of a hinge's ``beyond_joint`` (None otherwise)."""
     c = scene["contact"]
-    if c["aj"] != "beyond_joint":
+    seg = scene["body"][torque_segment_index(scene)] if c["aj"] == "beyond_joint" else None
+    if seg is None or seg["type"] != "hinge":
         return None
-    e1 = np.asarray(scene["body"][_torque_segment(scene)]["axis"], dtype=float)
+    e1 = np.asarray(seg["axis"], dtype=float)
     e1 = e1 / np.linalg.norm(e1)
     return lambda X: (X.T - J) @ e1 > 0.0
 
@@ -367,14 +442,15 @@ def _segment_torque(contact, model: ShellModel, k: int, joint: np.ndarray, comm)
     return comm.allreduce(np.asarray(tau, dtype=float), op=MPI.SUM)
 
 
-def _torque_columns(tau: np.ndarray, res: np.ndarray, hinge_axis: np.ndarray) -> dict:
-    """CSV columns of the Eq. 28 torque [N m] and the resultant on the body [N]."""
+def _torque_columns(tau: np.ndarray, res: np.ndarray, flex: float) -> dict:
+    """CSV columns of the Eq. 28 torque [N m], its component ``flex`` about the flexion axis
+    [N m] and the resultant on the body [N]."""
     return {
         "torque_x": tau[0],
         "torque_y": tau[1],
         "torque_z": tau[2],
         "torque_mag": float(np.linalg.norm(tau)),
-        "torque_flex": float(tau @ hinge_axis),
+        "torque_flex": flex,
         "resultant_x": res[0],
         "resultant_y": res[1],
         "resultant_z": res[2],
@@ -395,7 +471,11 @@ def _ellipsoid_meshes(bodies, *, scale: float = 0.985) -> list:
     return meshes
 
 
-def _torque_plot(csv_path: Path, png: Path, title: str) -> None:
+def _torque_plot(
+    csv_path: Path, png: Path, title: str, events: Sequence[tuple[float, str, str]] = ()
+) -> None:
+    """|tau| and the flexion component against the hinge angle, or against time (a recorded
+    motion) with the gait ``events`` (time [s], context, label) marked."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -415,9 +495,22 @@ def _torque_plot(csv_path: Path, png: Path, title: str) -> None:
     ax.plot(
         x, [float(r["torque_mag"]) for r in rows], "o-", color="C0", ms=4, label="|tau| (Eq. 28)"
     )
-    if hinged:
-        tf = [-float(r["torque_flex"]) for r in rows]
-        ax.plot(x, tf, "s--", color="C1", ms=4, mfc="none", label="-tau . hinge axis")
+    tf = [-float(r["torque_flex"]) for r in rows]
+    if any(tf):
+        label = "-tau . hinge axis" if hinged else "-tau . flexion axis"
+        ax.plot(x, tf, "s--", color="C1", ms=4, mfc="none", label=label)
+    for t, context, label in events if not hinged else ():
+        ax.axvline(t, color="0.6", lw=0.8, ls=":")
+        short = "".join(w[0] for w in label.split())  # "Foot Strike" -> "FS"
+        ax.text(
+            t,
+            0.98,
+            f" {context[:1]}{short}",
+            transform=ax.get_xaxis_transform(),
+            va="top",
+            fontsize=7,
+            color="0.4",
+        )
     ax.set_xlabel("flexion angle [deg]" if hinged else "time [s]")
     ax.set_ylabel("torque about the joint [N m]")
     ax.set_title(title)
@@ -448,6 +541,7 @@ def run_contact_scene(
     fails below the smallest step (rows written so far are kept).
     """
     summary = summary if summary is not None else {}
+    _write_events(scene, out, comm, summary)
     dynamic = {"explicit": _run_explicit, "newmark": _run_dynamic}.get(
         scene["solver"]["integrator"]
     )
@@ -476,7 +570,7 @@ def run_contact_scene(
     if c["stabilization"] > 0:
         stab = _ViscousStabilization(model, contact.lumped_area(), c["stabilization"])
     J = torque_centre(scene)
-    k_torque = _torque_segment(scene)
+    k_torque = torque_segment_index(scene)
     hinge_axis = (
         np.asarray(motions[k_torque].axis) if k_torque is not None else np.array([0.0, 0.0, 0.0])
     )
@@ -544,7 +638,7 @@ def run_contact_scene(
                 "time": t,
                 "load_factor": float(model.lam.value),
                 "angle_deg": angle,
-                **_torque_columns(tau, res, hinge_axis),
+                **_torque_columns(tau, res, float(tau @ hinge_axis)),
                 "n_active": last.n_active,
                 "max_penetration": max(r.max_penetration for r in recs),
                 "min_multiplier": min(r.min_multiplier for r in recs),
@@ -633,7 +727,7 @@ def run_contact_scene(
             progress.close()
             _end_together(comm)
             if png and comm.rank == 0 and writer.csv_path.exists():
-                _torque_plot(writer.csv_path, out / "torque_angle.png", name)
+                _torque_plot(writer.csv_path, out / "torque_angle.png", name, _events(summary))
 
                 def posed(t: float) -> list:
                     poses = [m.pose(t) for m in motions]
@@ -747,21 +841,22 @@ def _bodies_at(scene: dict[str, Any], motions: list) -> Callable[[float], tuple[
 
 @dataclass(frozen=True)
 class _Plan:
-    """What both dynamic runners derive from a scene: the Eq. 28 centre J, node set AJ and
-    hinge axis of the torque segment, and the clock (at rest until ``t_settle``, then the
-    hinge motion until ``t_end``)."""
+    """What the dynamic runners derive from a scene: the Eq. 28 measure (centre J, node set AJ,
+    flexion axis; J is None when it moves with a recorded segment) and the clock (at rest
+    until ``t_settle``, then the motion until ``t_end``)."""
 
     motions: list
     k_torque: int | None
-    J: np.ndarray
+    J: np.ndarray | None
     aj: Callable[[np.ndarray], np.ndarray] | None
     hinge_axis: np.ndarray
     hinged: bool
+    measure: TorqueMeasure | None
     t_settle: float
     t_end: float
 
     def angle_at(self, t: float) -> float:
-        """Flexion angle [deg] of the torque segment at time t [s]."""
+        """Flexion angle [deg] of the hinge torque segment at time t [s] (0 without one)."""
         if not self.hinged:
             return 0.0
         return math.degrees(self.motions[self.k_torque].angle(max(t - self.t_settle, 0.0)))
@@ -772,9 +867,10 @@ class _Plan:
 
 
 def _plan(scene: dict[str, Any], motions: list) -> _Plan:
+    k = torque_segment_index(scene)
+    hinged = k is not None and isinstance(motions[k], HingeMotion)
     J = torque_centre(scene) if scene["body"] else np.zeros(3)
-    k = _torque_segment(scene)
-    hinge_ids = [i for i, m in enumerate(motions) if isinstance(m, HingeMotion)]
+    aj = _aj_mask(scene, J) if scene["body"] and J is not None else None
     t_settle = scene["solver"]["settle_time"]
     moving = [m for m in motions if not isinstance(m, FixedMotion)]
     t_end = scene["solver"]["duration"]
@@ -784,9 +880,10 @@ def _plan(scene: dict[str, Any], motions: list) -> _Plan:
         motions=motions,
         k_torque=k,
         J=J,
-        aj=_aj_mask(scene, J) if scene["body"] else None,
-        hinge_axis=np.asarray(motions[k].axis) if k is not None else np.zeros(3),
-        hinged=bool(hinge_ids),
+        aj=aj,
+        hinge_axis=np.asarray(motions[k].axis) if hinged else np.zeros(3),
+        hinged=hinged,
+        measure=torque_measure(scene, motions, reference_mask=aj) if scene["body"] else None,
         t_settle=t_settle,
         t_end=t_end,
     )
@@ -876,8 +973,20 @@ def _run_dynamic(
     )
     contact = dc.contact
     plan = _plan(scene, motions)
-    J, aj, hinge_axis, t_end, angle_at = plan.J, plan.aj, plan.hinge_axis, plan.t_end, plan.angle_at
+    hinge_axis, t_end, angle_at = plan.hinge_axis, plan.t_end, plan.angle_at
     name = scene["scene"]["name"]
+    measure = plan.measure
+
+    def torque_at(t: float) -> tuple[np.ndarray, float]:
+        """Eq. 28 torque [N m] and its flexion component at t (collective)."""
+        if measure.mode == "all" or (measure.mode == "beyond_joint" and not measure.moving):
+            tau = contact.torque(measure.centre_at(t), nodes=plan.aj)  # a fixed node set
+            return tau, float(tau @ measure.axis_at(t))
+        nodes, body, f_pairs, _ = contact.pair_forces()  # per (node, ellipsoid) pair
+        x = contact.X[nodes] + model.u.x.array[: 3 * contact.n].reshape(-1, 3)[nodes]
+        tau, flex = measure.local(t=t, x=x, force_on_body=-f_pairs, body=body)
+        sums = comm.allreduce(np.append(tau, flex), op=MPI.SUM)
+        return sums[:3], float(sums[3])
 
     pressure = fem.Function(contact.S, name="contact_pressure")  # Pa, nodal (lam / area)
 
@@ -945,7 +1054,7 @@ def _run_dynamic(
                 run["run_rows"] = np.array(state["rows"] + 1)  # this step's row included
                 _checkpoint(out, comm, {**dc.state_arrays(), **run})
             t_io = time.perf_counter() - tio
-            tau = contact.torque(J, nodes=aj)
+            tau, flex = torque_at(r.time)
             res = contact.resultant()
             angle = angle_at(r.time)
             tm = {k: contact.timers[k] - timers0[k] for k in timers0}
@@ -958,7 +1067,7 @@ def _run_dynamic(
                 "dt": r.dt,
                 "load_factor": float(model.lam.value),
                 "angle_deg": angle,
-                **_torque_columns(tau, res, hinge_axis),
+                **_torque_columns(tau, res, flex),
                 "n_active": cr.n_active,
                 "max_penetration": cr.max_penetration,
                 "min_multiplier": cr.min_multiplier,
@@ -1026,7 +1135,7 @@ def _run_dynamic(
             progress.close()
             _end_together(comm)
             if o["png"] and comm.rank == 0 and writer.csv_path.exists():
-                _torque_plot(writer.csv_path, out / "torque_angle.png", name)
+                _torque_plot(writer.csv_path, out / "torque_angle.png", name, _events(summary))
                 _animation(scene, out, lambda t: bodies_at(t)[0])
     return out
 
@@ -1140,12 +1249,10 @@ def _run_explicit(
             fc.dissipation_total = float(data["contact_dissipation"])
         rank0_print(f"  resumed from the checkpoint after step {start['step']} (row {keep})")
     plan = _plan(scene, motions)
-    J, aj, hinge_axis, t_end, angle_at = plan.J, plan.aj, plan.hinge_axis, plan.t_end, plan.angle_at
+    t_end, angle_at, measure = plan.t_end, plan.angle_at, plan.measure
     k_torque, name = plan.k_torque, scene["scene"]["name"]
     n = model.n_owned
-    in_aj = None  # the fixed node set AJ (reference positions)
-    if fc is not None and aj is not None:
-        in_aj = np.asarray(aj(fc.X.T.copy()), dtype=bool)
+    in_aj = measure.fixed_mask(fc.X) if fc is not None else None  # hinge AJ (reference)
 
     pressure = None  # Pa, nodal (lam / reference lumped area), last step
     if fc is not None:
@@ -1163,7 +1270,7 @@ def _run_explicit(
         """The step to ``t`` ends a history row (one row per interval, and the last step)."""
         return t >= (state["row"] + 1) * interval - 1e-12 or t >= t_end - 1e-12
 
-    acc = {"tau": np.zeros(3), "res": np.zeros(3), "n": 0, "work": 0.0}
+    acc = {"tau": np.zeros(3), "res": np.zeros(3), "flex": 0.0, "n": 0, "work": 0.0}
     state.setdefault("work", 0.0)  # joint work up to the last row [J] (all ranks)
     hinge_motion = _measured_hinge(motions, k_torque)
     progress = Progress(
@@ -1173,28 +1280,26 @@ def _run_explicit(
     )
     state["t_last"] = 0.0  # time of the last step [s]
 
-    def local_torque_and_resultant(t: float) -> tuple[np.ndarray, np.ndarray, float]:
-        """Eq. 28 torque about J and the contact resultant of this step over the owned nodes,
-        and the power [W] the measured joint spends against the garment in it (-tau_seg .
-        omega, tau_seg the torque of the forces on the moving segment about its joint; not
-        reduced: the runner sums them over a row's steps and reduces once per row)."""
+    def local_torque_and_resultant(t: float) -> tuple[np.ndarray, float, np.ndarray, float]:
+        """Eq. 28 torque about J(t), its flexion component and the contact resultant of this
+        step over the owned nodes, and the power [W] the measured joint spends against the
+        garment in it (-tau_seg . omega, tau_seg the torque of the forces on the moving segment
+        about its joint; not reduced: the runner sums them over a row's steps and reduces once
+        per row)."""
         if fc is None:
-            return np.zeros(3), np.zeros(3), 0.0
+            return np.zeros(3), 0.0, np.zeros(3), 0.0
         f = fc.forces_on_body()
-        touching = fc.contact_body() == k_torque
-        on = touching if c["aj"] == "touching" else in_aj
+        body = fc.contact_body()
+        touching = body == k_torque
         x = fc.X + model.u.x.array[: 3 * n].reshape(n, 3)
-        if on is None:
-            tau = joint_torque(x, f, J)
-        else:
-            tau = joint_torque(x[on], f[on], J) if on.any() else np.zeros(3)
+        tau, flex = measure.local(t=t, x=x, force_on_body=f, body=body, fixed=in_aj)
         power = 0.0
         if hinge_motion is not None and t > t_settle and touching.any():
             omega = hinge_motion.pose(t - t_settle).angular_velocity
             if omega.any():
                 seg = joint_torque(x[touching], f[touching], hinge_motion.joint)
                 power = float(joint_power(seg, omega))
-        return np.asarray(tau, dtype=float), f.sum(axis=0), power
+        return tau, flex, f.sum(axis=0), power
 
     resume_after = start["time"] if resume else None
     with ResultWriter(out, model, keep_rows=keep, resume_after=resume_after) as writer:
@@ -1220,8 +1325,9 @@ def _run_explicit(
 
         def on_step(r) -> None:
             model.commit_material()  # the step is accepted: yarn-friction history to x_n+1
-            tau_local, res_local, power = local_torque_and_resultant(r.time)
+            tau_local, flex_local, res_local, power = local_torque_and_resultant(r.time)
             acc["tau"] += tau_local
+            acc["flex"] += flex_local
             acc["res"] += res_local
             acc["work"] += power * r.dt  # the impulse rule of report.joint_work
             acc["n"] += 1
@@ -1231,9 +1337,9 @@ def _run_explicit(
             h = fc.collect() if fc is not None else _NO_CONTACT  # the row's contact (collective)
             state["row"] += 1
             k = acc["n"]
-            sums = np.concatenate([acc["tau"], acc["res"], [acc["work"]]])
+            sums = np.concatenate([acc["tau"], acc["res"], [acc["work"], acc["flex"]]])
             comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)  # one reduction per row
-            tau, res = sums[:3] / k, sums[3:6] / k
+            tau, res, flex = sums[:3] / k, sums[3:6] / k, float(sums[7]) / k
             state["work"] += float(sums[6])
             angle = angle_at(r.time)
             now = time.perf_counter()
@@ -1253,7 +1359,7 @@ def _run_explicit(
                 "dt": r.dt,
                 "load_factor": r.load_factor,
                 "angle_deg": angle,
-                **_torque_columns(tau, res, hinge_axis),
+                **_torque_columns(tau, res, flex),
                 "n_active": h.active,
                 "max_penetration": pen_after,
                 "predictor_penetration": h.max_penetration,
@@ -1277,7 +1383,7 @@ def _run_explicit(
             writer.append_row(row)
             every = o["checkpoint_every"]
             state["checkpoint"] = bool(every) and state["row"] % every == 0
-            acc.update(tau=np.zeros(3), res=np.zeros(3), n=0, work=0.0)
+            acc.update(tau=np.zeros(3), res=np.zeros(3), flex=0.0, n=0, work=0.0)
             summary.update(
                 final_angle_deg=angle,
                 time=r.time,
@@ -1336,6 +1442,6 @@ def _run_explicit(
             _end_together(comm)
             if o["png"] and comm.rank == 0 and writer.csv_path.exists():
                 if scene["body"]:
-                    _torque_plot(writer.csv_path, out / "torque_angle.png", name)
+                    _torque_plot(writer.csv_path, out / "torque_angle.png", name, _events(summary))
                 _animation(scene, out, lambda t: bodies_at(t)[0])
     return out

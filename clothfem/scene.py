@@ -540,14 +540,36 @@ SCHEMA: dict[str, Section] = {
                 lo=1,
             ),
             "torque_segment": Key(
-                "str", "hinge segment whose joint is the Eq. 28 centre J (default: first hinge)"
+                "str",
+                "segment whose joint is the Eq. 28 centre J (default: the first hinge): a "
+                "hinge's joint, or a mocap segment's proximal joint J1 carried with its Eq. 27 "
+                "frame (J moves with the body, e.g. the knee for a shank)",
             ),
             "torque_point": Key("vec3", "explicit Eq. 28 centre J [m] (overrides the joint)"),
+            "torque_with": Key(
+                "strs",
+                "aj = 'touching': more segments whose contact forces count (e.g. the foot "
+                "with the shank)",
+            ),
+            "flexion_frame": Key(
+                "str",
+                "mocap torque segment: the segment whose Eq. 27 frame gives the flexion axis "
+                "of torque_flex (e.g. the thigh for the knee; default: the torque segment)",
+            ),
+            "flexion_axis": Key(
+                "choice",
+                "mocap torque segment: the flexion_frame axis that is the flexion axis: 'e3' "
+                "(= e1 x e2; medio-lateral when M is anterior, as the lower body's thigh and "
+                "shank) or 'e2' (towards M; medio-lateral when M is a lateral marker)",
+                default="e3",
+                choices=("e2", "e3"),
+            ),
             "aj": Key(
                 "choice",
-                "Eq. 28 node set AJ: 'beyond_joint' = nodes whose reference position lies past "
-                "the plane through J normal to the torque segment's axis at t = 0; "
-                "'touching' = nodes in contact with the torque segment; 'all' = every node",
+                "Eq. 28 node set AJ: 'beyond_joint' = nodes past the plane through J normal "
+                "to the torque segment's axis (a hinge: reference positions at t = 0; a mocap "
+                "segment: current positions and the plane at t); 'touching' = nodes in "
+                "contact with the torque segment (and contact.torque_with); 'all' = every node",
                 default="beyond_joint",
                 choices=("beyond_joint", "touching", "all"),
             ),
@@ -972,16 +994,40 @@ def _validate_body(data: dict[str, Any], out: dict[str, Any]) -> None:
         )
     if c["self_contact"] and not film:
         _fail("contact.self_contact", "needs solver.integrator = 'explicit' (implicit: not yet)")
+    _validate_torque(c, body)
+
+
+def _validate_torque(c: dict[str, Any], body: list[dict[str, Any]]) -> None:
+    """The Eq. 28 keys of ``[contact]``: J, AJ and the flexion frame (torque_measure)."""
+    moving = [seg["name"] for seg in body if seg["type"] in ("hinge", "mocap")]
+    names = [seg["name"] for seg in body]
     hinges = [seg["name"] for seg in body if seg["type"] == "hinge"]
-    if c["torque_segment"] is not None and c["torque_segment"] not in hinges:
+    named = c["torque_segment"]
+    if named is not None and named not in moving:
         _fail(
             "contact.torque_segment",
-            f"must name a hinge segment, one of {hinges}, got {c['torque_segment']!r}",
+            f"must name a hinge or mocap segment, one of {moving}, got {named!r}",
         )
-    if not hinges and c["torque_point"] is None:
-        _fail("contact.torque_point", "required when no body segment is a hinge")
-    if c["aj"] != "all" and not hinges:
-        _fail("contact.aj", f"{c['aj']!r} needs a hinge segment; use 'all'")
+    if named is None and not hinges and c["torque_point"] is None:
+        _fail(
+            "contact.torque_point",
+            "required when no body segment is a hinge and contact.torque_segment is not set",
+        )
+    if c["aj"] != "all" and named is None and not hinges:
+        _fail("contact.aj", f"{c['aj']!r} needs a torque segment (contact.torque_segment)")
+    for other in c["torque_with"] or ():
+        if other not in names:
+            _fail("contact.torque_with", f"must name body segments, one of {names}, got {other!r}")
+    if c["torque_with"] and c["aj"] != "touching":
+        _fail("contact.torque_with", f"counts with aj = 'touching' only, got aj = {c['aj']!r}")
+    mocap = [seg["name"] for seg in body if seg["type"] == "mocap"]
+    if c["flexion_frame"] is not None and named not in mocap:
+        _fail("contact.flexion_frame", "needs a mocap contact.torque_segment")
+    if c["flexion_frame"] is not None and c["flexion_frame"] not in mocap:
+        _fail(
+            "contact.flexion_frame",
+            f"must name a mocap segment, one of {mocap}, got {c['flexion_frame']!r}",
+        )
 
 
 def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
