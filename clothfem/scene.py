@@ -622,6 +622,20 @@ SCHEMA: dict[str, Section] = {
         "contact of the fabric with the body (only built with a [[body]])",
         optional=True,
     ),
+    "initial": Section(
+        {
+            "positions": Key(
+                "str",
+                "NumPy .npz with X (N, 3), the reference (pattern) node positions [m], and x "
+                "(N, 3), their positions at the start [m], e.g. the donned.npz of `python -m "
+                "clothfem.particle.donning`; nodes matched by X; the reference stays the mesh, "
+                "directors follow the deformed surface (relative paths: from the working "
+                "folder, else the scene file's folder)",
+            ),
+        },
+        "the state a run starts from (default: the mesh at rest)",
+        optional=True,
+    ),
     "output": Section(
         {
             "every": Key(
@@ -789,6 +803,7 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
         _fail("element.stabilization", "is a parameter of element.scheme = 'sri' only")
     _validate_body(data, out)
     _validate_mocap(out, base=None if base is None else Path(base))
+    _validate_initial(out, base=None if base is None else Path(base))
     _validate_duration(out)
     return out
 
@@ -819,6 +834,32 @@ def _read_motion(path: Path):
     from .body import read_c3d, read_trc
 
     return read_trc(path) if path.suffix.lower() == ".trc" else read_c3d(path)
+
+
+def _validate_initial(out: dict[str, Any], *, base: Path | None) -> None:
+    """``initial.positions``: the file reads as two finite (N, 3) arrays; no supports (they
+    would hold nodes at their pattern positions)."""
+    from .initial_state import read_positions
+
+    given = out["initial"]["positions"]
+    if given is None:
+        return
+    path = Path(given)
+    if not path.is_absolute() and not path.is_file() and base is not None:
+        path = base / path
+    if not path.is_file():
+        _fail("initial.positions", f"{given!r} does not exist (an .npz file with X and x)")
+    try:
+        read_positions(path)
+    except ValueError as exc:
+        _fail("initial.positions", str(exc))
+    if out["supports"]:
+        _fail(
+            "initial.positions",
+            "a run from given positions takes no [[supports]] (they hold nodes at the pattern "
+            f"positions), got {len(out['supports'])}",
+        )
+    out["initial"]["positions"] = str(path)
 
 
 def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:

@@ -212,13 +212,17 @@ class ShellModel:
         marker.x.scatter_forward()
         return marker.x.array > 0
 
-    def _build_directors(self) -> None:
-        """Nodal reference directors: averaged unit cell normals at the nodes."""
+    def _nodal_normals(self, u: fem.Function | None, out: fem.Function) -> np.ndarray:
+        """Unit cell normals of the surface X + ``u`` (the reference one for None) summed at
+        the nodes into ``out`` (collective) and returned normalised, (n_local, 3); nodes
+        where they cancel (|sum| < 0.5) get NaN."""
         mesh, V = self.mesh, self.V
         J = ufl.Jacobian(mesh)
-        n = ufl.cross(
-            ufl.as_vector([J[i, 0] for i in range(3)]), ufl.as_vector([J[i, 1] for i in range(3)])
-        )
+        t1, t2 = (ufl.as_vector([J[i, k] for i in range(3)]) for k in (0, 1))
+        if u is not None:  # the deformed tangents a_k = (I + grad u) t_k
+            F = ufl.Identity(3) + ufl.grad(u)
+            t1, t2 = F * t1, F * t2
+        n = ufl.cross(t1, t2)
         points = V.element.interpolation_points()
         expr = fem.Expression(n / ufl.sqrt(ufl.dot(n, n)), points)
         n_cells = mesh.topology.index_map(2).size_local  # may be 0 on a rank
@@ -227,17 +231,22 @@ class ShellModel:
             values = expr.eval(np.arange(n_cells, dtype=np.int32)).reshape(n_cells, -1, 3)
             dofs = V.dofmap.list.array.reshape(-1, len(points))[:n_cells]
             np.add.at(acc, dofs.ravel(), values.reshape(-1, 3))
-        self.D.x.array[:] = acc.ravel()
-        self.D.x.scatter_reverse(la.ScatterMode.add)
-        self.D.x.scatter_forward()
-        normals = self.D.x.array.reshape(-1, 3)
+        out.x.array[:] = acc.ravel()
+        out.x.scatter_reverse(la.ScatterMode.add)
+        out.x.scatter_forward()
+        normals = out.x.array.reshape(-1, 3).copy()
         norms = np.linalg.norm(normals, axis=1)
-        if np.any(norms < 0.5):
+        normals /= np.where(norms < 0.5, np.nan, norms)[:, None]
+        return normals
+
+    def _build_directors(self) -> None:
+        """Nodal reference directors: averaged unit cell normals at the nodes."""
+        normals = self._nodal_normals(None, self.D)
+        if np.isnan(normals).any():
             raise ValueError(
                 "mesh orientation is inconsistent: cell normals cancel at some nodes "
                 "(orient all cells the same way before meshing)"
             )
-        normals /= norms[:, None]
         self.D.x.array[:] = normals.ravel()
         axes = np.zeros((self.n_local, 3), dtype=bool)  # node on the symmetry plane x, y, z
         for s in self.supports:
@@ -575,6 +584,32 @@ class ShellModel:
             self._f_ext_lam = None  # edge moments act on the rotation in the new bases
             self.update_director()  # collective (assembles P)
         return nodes
+
+    def start_at(self, u: np.ndarray) -> int:
+        """Start from the displacement ``u`` [m] of every local node (n_local, 3), owned and
+        ghost (e.g. a donned garment: the reference stays the pattern), with each director
+        along the deformed surface's nodal normal: the fibre bases are re-based on those
+        normals and the rotations set to 0, as :meth:`rebase` does (collective). Returns the
+        number of owned nodes whose director turned by more than 90 degrees from the
+        reference (0 for a surface that does not fold over). Raises ``ValueError`` where the
+        deformed normals cancel (the surface folds back on itself)."""
+        if u.shape != (self.n_local, 3) or not np.all(np.isfinite(u)):
+            raise ValueError(f"u must be finite with shape {(self.n_local, 3)}, got {u.shape}")
+        self.u.x.array[:] = u.ravel()
+        self.u.x.scatter_forward()
+        work = fem.Function(self.V)
+        normals = self._nodal_normals(self.u, work)
+        bad = self.comm.allreduce(int(np.isnan(normals[: self.n_owned]).any(axis=1).sum()))
+        if bad:
+            raise ValueError(f"the deformed surface folds back on itself at {bad} node(s)")
+        self.basis[:] = self._fibre_basis(normals, np.arange(self.n_local))
+        for k, E in enumerate(self._fibre_e):
+            E.x.array.reshape(-1, 3)[:] = self.basis[:, k]
+        self.theta.x.array[:] = 0.0
+        self._f_ext_lam = None
+        self.update_director()
+        flipped = np.einsum("ij,ij->i", normals, self.D.x.array.reshape(-1, 3)) < 0.0
+        return int(self.comm.allreduce(int(flipped[: self.n_owned].sum())))
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         """The rank-local state to checkpoint: u, theta (owned + ghost), the nodal fibre bases
