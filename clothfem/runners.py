@@ -51,7 +51,8 @@ import numpy as np
 from dolfinx import fem
 from mpi4py import MPI
 
-from .body import FixedMotion, HingeMotion, MarkerSet, Pose, body_from_markers, segment_frames
+from .body import FixedMotion, HingeMotion, MarkerSet, Pose, segment_frames
+from .body.motion import InterpolatedMotion
 from .contact.forces import joint_torque
 from .contact.lagrange import ContactDivergence, LagrangeContact, LagrangeContactParameters
 from .history import yarn_strain_columns
@@ -79,18 +80,17 @@ def _frame(axis, up) -> np.ndarray:
 class PlayedMotion:
     """A recorded segment motion (``motion``, an :class:`InterpolatedMotion` whose times start
     at 0 at the window start) played until ``t_end`` [s], then at rest in its last pose;
-    ``half_length`` [m] is half the mean J1-J2 distance of the recording (where the proximal
-    joint J1 sits on the segment's axis, :meth:`joint`)."""
+    ``joint_local`` [m] is the proximal joint J1 in the segment frame about the ellipsoid
+    centre: ``-offset - (L/2, 0, 0)``, L the mean J1-J2 distance of the recording."""
 
     motion: Any
     t_end: float
-    half_length: float = 0.0
+    joint_local: np.ndarray
 
     def joint(self, t: float) -> np.ndarray:
-        """The proximal joint J1 [m] at t [s], carried with the Eq. 27 frame:
-        ``c(t) - half_length e1(t)``."""
+        """The proximal joint J1 [m] at t [s], carried with the segment's frame."""
         p = self.pose(t)
-        return p.centre - self.half_length * p.rotation[:, 0]
+        return p.centre + p.rotation @ self.joint_local
 
     def pose(self, t: float) -> Pose:
         if t >= self.t_end:
@@ -150,16 +150,17 @@ def _mocap_motions(scene: dict[str, Any]) -> dict[int, PlayedMotion]:
             source=own.source,
             first_frame=own.first_frame,
         )
-        body = body_from_markers(
-            moved,
-            marker_map={seg["name"]: refs(seg)},
-            radii={seg["name"]: seg["radii"]},
-            max_gap=seg["max_gap"],
-        )
-        motion = body.segments[0].motion
         fr = segment_frames(moved, marker_map={seg["name"]: refs(seg)}, max_gap=seg["max_gap"])
-        half = 0.5 * float(np.mean(np.linalg.norm(fr[seg["name"]].j2 - fr[seg["name"]].j1, axis=1)))
-        out[i] = PlayedMotion(motion=motion, t_end=float(motion.times[-1]), half_length=half)
+        fr = fr[seg["name"]]
+        offset = np.asarray(seg["offset"] or (0.0, 0.0, 0.0), dtype=float)
+        motion = InterpolatedMotion(  # Eq. 27 centroids moved by the offset in the frame
+            times=fr.times,
+            centres=fr.centres + fr.rotations @ offset,
+            rotations=fr.rotations,
+            name=seg["name"],
+        )
+        joint = -offset - [0.5 * float(np.mean(np.linalg.norm(fr.j2 - fr.j1, axis=1))), 0, 0]
+        out[i] = PlayedMotion(motion=motion, t_end=float(motion.times[-1]), joint_local=joint)
     return out
 
 

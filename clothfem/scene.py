@@ -460,6 +460,11 @@ SCHEMA: dict[str, Section] = {
                 "mocap: C3D or TRC recording (relative paths: from the working folder, else "
                 "from the scene file's folder)",
             ),
+            "offset": Key(
+                "vec3",
+                "mocap: ellipsoid centre offset from the Eq. 27 centroid (J1 + J2) / 2 in the "
+                "segment frame (e1, e2, e3) [m] (e.g. the pelvis centre behind the hip line)",
+            ),
             "j1": Key("marker", "mocap: proximal joint centre J1 (Eq. 27)"),
             "j2": Key("marker", "mocap: distal joint centre J2 (Eq. 27)"),
             "m": Key("marker", "mocap: auxiliary marker M fixing the roll (Eq. 27)"),
@@ -872,7 +877,7 @@ def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
     cache: dict[Path, Any] = {}
     for i, seg in enumerate(body):
         if seg["type"] != "mocap":
-            for k in ("file", "j1", "j2", "m", "window", "placed_by", "stride_markers"):
+            for k in ("file", "j1", "j2", "m", "window", "placed_by", "stride_markers", "offset"):
                 if seg[k] is not None:
                     _fail(f"body[{i}].{k}", "is a key of type = 'mocap' segments only")
             continue

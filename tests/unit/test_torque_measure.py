@@ -66,7 +66,7 @@ def test_knee_centre_moves_with_the_shank_and_meets_the_thigh(knee):
     for t in np.linspace(0.0, shank.t_end, 23):
         assert np.allclose(m.centre_at(SETTLE + t), shank.joint(t))
         p = thigh.pose(t)
-        knee_of_thigh = p.centre + thigh.half_length * p.rotation[:, 0]
+        knee_of_thigh = p.centre - p.rotation @ thigh.joint_local  # J2 = c + L/2 e1
         assert np.linalg.norm(shank.joint(t) - knee_of_thigh) < 3e-3
 
 
@@ -160,3 +160,15 @@ def test_a_fixed_centre_is_required_without_a_torque_segment():
     with pytest.raises(scenes.SceneError, match=r"'contact.torque_point': required when") as info:
         scenes.validate(_raw_knee(contact={"aj": "all"}))
     assert "\n" not in str(info.value)
+
+
+def test_offset_moves_the_ellipsoid_not_the_joint(knee):
+    """body.offset (segment frame) moves the ellipsoid centre by Q offset; J1 stays put."""
+    data = _raw_knee()
+    data["body"][1]["offset"] = [0.02, -0.03, 0.01]
+    shifted = body_motions(scenes.validate(data))[1]
+    shank = knee[1][1]
+    for t in (0.0, 0.37, 0.9):
+        p, q = shank.pose(t), shifted.pose(t)
+        assert np.allclose(q.centre, p.centre + p.rotation @ [0.02, -0.03, 0.01], atol=1e-12)
+        assert np.allclose(shifted.joint(t), shank.joint(t), atol=1e-12)
