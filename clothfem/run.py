@@ -232,7 +232,8 @@ def build_mesh(scene: dict[str, Any], comm: MPI.Comm) -> meshes.SurfaceMesh:
     elif gen == "pants":
         from .pants_mesh import pants
 
-        dims = ("waist_radius", "leg_radius", "leg_length", "crotch_depth", "leg_spacing")
+        dims = ("waist_radius", "hip_radius", "leg_radius", "leg_length", "crotch_depth")
+        dims += ("leg_spacing",)
         try:
             sm = pants(
                 comm,

@@ -114,7 +114,8 @@ def _window(markers: MarkerSet, window: list[float]) -> MarkerSet:
 def _mocap_motions(scene: dict[str, Any]) -> dict[int, PlayedMotion]:
     """The motions of the ``type = "mocap"`` segments: each recording's window, moved by the
     rigid transform that puts the placing segment's Eq. 27 pose at the window start at its
-    ``centre`` with axes (``axis``, ``up``), played from t = 0 (:func:`body_from_markers`)."""
+    ``centre`` with axes (``axis``, ``up``) (none with ``placement = 'recording'``), played
+    from t = 0; the ellipsoid centres moved by ``offset`` in the segment frame."""
     from .scene import _read_motion, repeated_markers
 
     segs = scene["body"]
@@ -140,8 +141,10 @@ def _mocap_motions(scene: dict[str, Any]) -> dict[int, PlayedMotion]:
             part(placing), marker_map={placing["name"]: refs(placing)}, max_gap=placing["max_gap"]
         )[placing["name"]]
         c0, q0 = ref.centres[0], ref.rotations[0]
-        rot = _frame(placing["axis"], placing["up"]) @ q0.T
-        shift = np.asarray(placing["centre"]) - rot @ c0
+        rot, shift = np.eye(3), np.zeros(3)  # placement = 'recording'
+        if placing["placement"] == "centre":
+            rot = _frame(placing["axis"], placing["up"]) @ q0.T
+            shift = np.asarray(placing["centre"]) - rot @ c0
         own = part(seg)
         moved = MarkerSet(
             times=own.times - own.times[0],

@@ -144,6 +144,13 @@ SCHEMA: dict[str, Section] = {
             ),
             "n_along": Key("int", "tube/panel cells along x (pants: rows along each leg)", lo=1),
             "waist_radius": Key("float", "pants: waist circle radius [m] (default 0.14)", **POS),
+            "hip_radius": Key(
+                "float",
+                "pants: radius [m] of the circle with the perimeter of the hip section (an "
+                "ellipse round both legs; default: its minor semi-axis 1.05 x the smallest "
+                "that encloses the legs)",
+                **POS,
+            ),
             "leg_radius": Key("float", "pants: leg tube radius [m] (default 0.09)", **POS),
             "leg_length": Key("float", "pants: crotch to hem [m] (default 0.75)", **POS),
             "crotch_depth": Key("float", "pants: waist to crotch [m] (default 0.25)", **POS),
@@ -459,6 +466,15 @@ SCHEMA: dict[str, Section] = {
                 "str",
                 "mocap: C3D or TRC recording (relative paths: from the working folder, else "
                 "from the scene file's folder)",
+            ),
+            "placement": Key(
+                "choice",
+                "mocap, the placing segment: 'centre' moves the recording rigidly so that this "
+                "segment's Eq. 27 pose at the window start has its centre at `centre` with "
+                "axes (axis, up); 'recording' keeps the recording's own coordinates (in m; "
+                "e.g. to meet a garment donned on the recorded pose)",
+                default="centre",
+                choices=("centre", "recording"),
             ),
             "offset": Key(
                 "vec3",
@@ -880,6 +896,8 @@ def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
             for k in ("file", "j1", "j2", "m", "window", "placed_by", "stride_markers", "offset"):
                 if seg[k] is not None:
                     _fail(f"body[{i}].{k}", "is a key of type = 'mocap' segments only")
+            if seg["placement"] != "centre":
+                _fail(f"body[{i}].placement", "is a key of type = 'mocap' segments only")
             continue
         key = f"body[{i}]"
         if out["solver"]["integrator"] == "static":
@@ -940,7 +958,13 @@ def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
         placed = seg["placed_by"] or seg["name"]
         if placed not in names or body[names.index(placed)]["type"] != "mocap":
             _fail(f"{key}.placed_by", f"must name a mocap segment, one of {names}, got {placed!r}")
-        if body[names.index(placed)]["centre"] is None:
+        placing = body[names.index(placed)]
+        if placing["placement"] == "recording" and placing["centre"] is not None:
+            _fail(
+                f"body[{names.index(placed)}].centre",
+                "is not used with placement = 'recording' (the recording stays where it is)",
+            )
+        if placing["placement"] == "centre" and placing["centre"] is None:
             _fail(
                 f"body[{names.index(placed)}].centre",
                 f"required: segment {placed!r} places the recording",

@@ -172,3 +172,24 @@ def test_offset_moves_the_ellipsoid_not_the_joint(knee):
         p, q = shank.pose(t), shifted.pose(t)
         assert np.allclose(q.centre, p.centre + p.rotation @ [0.02, -0.03, 0.01], atol=1e-12)
         assert np.allclose(shifted.joint(t), shank.joint(t), atol=1e-12)
+
+
+def test_recording_placement_keeps_the_recorded_coordinates():
+    """placement = 'recording' (no centre): the thigh's pose at t = 0 is its Eq. 27 frame at
+    the first played frame of the file, in m."""
+    from clothfem.body import read_c3d, segment_frames
+
+    data = _raw_knee()
+    thigh = data["body"][0]
+    for k in ("centre", "axis", "up"):
+        del thigh[k]
+    thigh["placement"] = "recording"
+    motion = body_motions(scenes.validate(data))[0]
+    markers = read_c3d(WALK)
+    row = int(np.searchsorted(markers.times, thigh["window"][0] - 1e-9))
+    ref = segment_frames(markers, marker_map={"t": {"j1": "RFEP", "j2": "RFEO", "m": "RFEA"}})
+    assert np.allclose(motion.pose(0.0).centre, ref["t"].centres[row], atol=1e-12)
+    assert np.allclose(motion.pose(0.0).rotation, ref["t"].rotations[row], atol=1e-9)
+    data["body"][0]["centre"] = [0.0, 0.0, 0.0]
+    with pytest.raises(scenes.SceneError, match=r"'body\[0\].centre': is not used with"):
+        scenes.validate(data)
