@@ -349,14 +349,15 @@ def _initial_state(scene: dict[str, Any], model: ShellModel) -> str:
     X, x = read_positions(Path(path))
     try:
         u = displacement_at_nodes(nodes=model.x_nodes, X=X, x=x)
-        flipped = model.start_at(u)
+        model.start_at(u)
     except ValueError as exc:
         raise SceneError(f"scene key 'initial.positions': {exc}") from None
     umax = model.comm.allreduce(float(np.abs(u).max(initial=0.0)), op=MPI.MAX)
+    lo, hi = model.yarn_strain_range()
     return (
         f"initial state: the positions of {Path(path).name} (reference: the mesh; max "
-        f"displacement component {umax:.4g} m; directors along the deformed normals, "
-        f"{flipped} turned past 90 deg)"
+        f"displacement component {umax:.4g} m; directors turned with their neighbourhoods; "
+        f"yarn Green strains {lo:.3g} .. {hi:.3g} at the start)"
     )
 
 

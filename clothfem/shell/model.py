@@ -212,16 +212,13 @@ class ShellModel:
         marker.x.scatter_forward()
         return marker.x.array > 0
 
-    def _nodal_normals(self, u: fem.Function | None, out: fem.Function) -> np.ndarray:
-        """Unit cell normals of the surface X + ``u`` (the reference one for None) summed at
-        the nodes into ``out`` (collective) and returned normalised, (n_local, 3); nodes
-        where they cancel (|sum| < 0.5) get NaN."""
+    def _nodal_normals(self, out: fem.Function) -> np.ndarray:
+        """Unit cell normals of the reference surface summed at the nodes into ``out``
+        (collective) and returned normalised, (n_local, 3); nodes where they cancel
+        (|sum| < 0.5) get NaN."""
         mesh, V = self.mesh, self.V
         J = ufl.Jacobian(mesh)
         t1, t2 = (ufl.as_vector([J[i, k] for i in range(3)]) for k in (0, 1))
-        if u is not None:  # the deformed tangents a_k = (I + grad u) t_k
-            F = ufl.Identity(3) + ufl.grad(u)
-            t1, t2 = F * t1, F * t2
         n = ufl.cross(t1, t2)
         points = V.element.interpolation_points()
         expr = fem.Expression(n / ufl.sqrt(ufl.dot(n, n)), points)
@@ -241,7 +238,7 @@ class ShellModel:
 
     def _build_directors(self) -> None:
         """Nodal reference directors: averaged unit cell normals at the nodes."""
-        normals = self._nodal_normals(None, self.D)
+        normals = self._nodal_normals(self.D)
         if np.isnan(normals).any():
             raise ValueError(
                 "mesh orientation is inconsistent: cell normals cancel at some nodes "
@@ -585,31 +582,48 @@ class ShellModel:
             self.update_director()  # collective (assembles P)
         return nodes
 
-    def start_at(self, u: np.ndarray) -> int:
+    def _neighbourhood_rotations(self, u: np.ndarray) -> np.ndarray:
+        """Per local node, the rotation (n_local, 3, 3) that best maps the reference
+        positions of the nodes sharing a cell with it, relative to it, onto the displaced
+        ones (Kabsch: the SVD of the covariance, summed over cells and ranks; collective)."""
+        V = self.V
+        n_cells = self.mesh.topology.index_map(2).size_local
+        dofs = V.dofmap.list.array.reshape(-1, V.dofmap.dof_layout.num_dofs)[:n_cells]
+        H = np.zeros((self.n_local, 3, 3))
+        X, x = self.x_nodes, self.x_nodes + u
+        for a in range(dofs.shape[1]):
+            dX = X[dofs] - X[dofs[:, a]][:, None, :]  # (cells, nodes per cell, 3)
+            dx = x[dofs] - x[dofs[:, a]][:, None, :]
+            np.add.at(H, dofs[:, a], np.einsum("cki,ckj->cij", dX, dx))
+        acc = fem.Function(
+            fem.VectorFunctionSpace(self.mesh, (V.ufl_element().family(), self.degree), dim=9)
+        )
+        acc.x.array[:] = H.ravel()
+        acc.x.scatter_reverse(la.ScatterMode.add)
+        acc.x.scatter_forward()
+        U, _, Vt = np.linalg.svd(acc.x.array.reshape(-1, 3, 3))
+        sign = np.sign(np.linalg.det(np.einsum("nji,nkj->nik", Vt, U)))
+        return np.einsum("nji,nj,nkj->nik", Vt, np.stack([np.ones_like(sign)] * 2 + [sign], 1), U)
+
+    def start_at(self, u: np.ndarray) -> None:
         """Start from the displacement ``u`` [m] of every local node (n_local, 3), owned and
         ghost (e.g. a donned garment: the reference stays the pattern), with each director
-        along the deformed surface's nodal normal: the fibre bases are re-based on those
-        normals and the rotations set to 0, as :meth:`rebase` does (collective). Returns the
-        number of owned nodes whose director turned by more than 90 degrees from the
-        reference (0 for a surface that does not fold over). Raises ``ValueError`` where the
-        deformed normals cancel (the surface folds back on itself)."""
+        the reference one turned by the best-fit rotation of the node's cell neighbourhood
+        (exact for a rigid motion; folds and creases get the mean rotation): the fibre bases
+        are re-based on those directors and the rotations set to 0, as :meth:`rebase` does
+        (collective)."""
         if u.shape != (self.n_local, 3) or not np.all(np.isfinite(u)):
             raise ValueError(f"u must be finite with shape {(self.n_local, 3)}, got {u.shape}")
         self.u.x.array[:] = u.ravel()
         self.u.x.scatter_forward()
-        work = fem.Function(self.V)
-        normals = self._nodal_normals(self.u, work)
-        bad = self.comm.allreduce(int(np.isnan(normals[: self.n_owned]).any(axis=1).sum()))
-        if bad:
-            raise ValueError(f"the deformed surface folds back on itself at {bad} node(s)")
+        D = self.D.x.array.reshape(-1, 3)
+        normals = np.einsum("nij,nj->ni", self._neighbourhood_rotations(u), D)
         self.basis[:] = self._fibre_basis(normals, np.arange(self.n_local))
         for k, E in enumerate(self._fibre_e):
             E.x.array.reshape(-1, 3)[:] = self.basis[:, k]
         self.theta.x.array[:] = 0.0
         self._f_ext_lam = None
         self.update_director()
-        flipped = np.einsum("ij,ij->i", normals, self.D.x.array.reshape(-1, 3)) < 0.0
-        return int(self.comm.allreduce(int(flipped[: self.n_owned].sum())))
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         """The rank-local state to checkpoint: u, theta (owned + ghost), the nodal fibre bases
