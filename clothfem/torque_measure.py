@@ -8,9 +8,11 @@
   a shank, the elbow for a forearm;
 * **a(t)**, the unit flexion axis of ``torque_flex = tau . a``: a hinge's rotation axis, or
   the ``contact.flexion_axis`` column (``e2`` towards the roll marker M, or ``e3 = e1 x e2``)
-  of the ``contact.flexion_frame`` segment's Eq. 27 frame (for the lower body's thigh frame,
-  M anterior, e3 is medio-lateral and points to the subject's right: knee flexion turns the
-  shank about -e3);
+  of the ``contact.flexion_frame`` segment's Eq. 27 frame, signed so that flexion is a
+  positive rotation about it as for a hinge (the sign of the median of
+  ``(e1_frame x e1_segment) . e`` over the recording; for the lower body's thigh frame, M
+  anterior, e3 points to the subject's right and knee flexion turns the shank about -e3, so
+  a = -e3). A garment that resists flexion gives ``torque_flex < 0``, as for a hinge;
 * **AJ(t)**, the node set: every node (``all``), the nodes in contact with the torque
   segment and the ``contact.torque_with`` segments (``touching``), or the nodes past the plane
   through J normal to the torque segment's axis (``beyond_joint``: in reference positions for
@@ -121,6 +123,20 @@ def torque_segment_index(scene: dict[str, Any]) -> int | None:
     return None
 
 
+def _flexion_sign(frame: Any, segment: Any, column: int, samples: int = 64) -> float:
+    """+1 or -1: the sign that makes flexion a positive rotation about the frame's axis, i.e.
+    of the median of ``(e1_frame x e1_segment) . e_column`` over the recorded motion (the
+    distal segment turns that way as the joint flexes); +1 when the frame is the segment."""
+    if frame is segment:
+        return 1.0
+    ts = np.linspace(0.0, segment.t_end, samples)
+    dots = []
+    for t in ts:
+        a, b = frame.pose(t).rotation, segment.pose(t).rotation
+        dots.append(np.cross(a[:, 0], b[:, 0]) @ a[:, column])
+    return 1.0 if np.median(dots) >= 0.0 else -1.0
+
+
 def _constant(v: Any) -> Callable[[float], FloatArray]:
     a = np.asarray(v, dtype=float).copy()
     a.setflags(write=False)
@@ -155,6 +171,7 @@ def torque_measure(
     seg_motion = motions[k]
     frame = motions[names.index(c["flexion_frame"] or body[k]["name"])]
     column = {"e2": 1, "e3": 2}[c["flexion_axis"]]
+    sign = _flexion_sign(frame, seg_motion, column)
 
     def clock(t: float) -> float:
         return max(t - t_settle, 0.0)
@@ -166,7 +183,7 @@ def torque_measure(
     return TorqueMeasure(
         mode=c["aj"],
         centre_at=centre,
-        axis_at=lambda t: frame.pose(clock(t)).rotation[:, column],
+        axis_at=lambda t: sign * frame.pose(clock(t)).rotation[:, column],
         normal_at=lambda t: seg_motion.pose(clock(t)).rotation[:, 0],
         segments=segments,
     )
