@@ -76,7 +76,8 @@ def _finite(name: str, value: float, *, low: float = 0.0, strict: bool = True) -
     v = float(value)
     ok = math.isfinite(v) and (v > low if strict else v >= low)
     if not ok:
-        raise ValueError(f"{name} must be a finite number {'>' if strict else '>='} {low:g}")
+        op = ">" if strict else ">="
+        raise ValueError(f"{name} must be a finite number {op} {low:g}, got {value!r}")
     return v
 
 
@@ -408,8 +409,10 @@ class Relaxation:
     belt_time: the belt nodes move from their skinned to their belt positions over this
     time [s] > 0 (smoothstep); alpha: mass-proportional damping [1/s] >= 0; beta:
     spring-axis damping [s] >= 0; max_stretch: Provot strain limit [-] > 0 of structural and
-    shear springs (None: off); gravity [m/s^2] (3,); mu: Coulomb coefficient >= 0 of the contact (0:
-    frictionless); offset: contact thickness [m] >= 0; safety: dt as this fraction (0, 1]
+    shear springs (None: off), at most ``limit_sweeps`` Jacobi sweeps a step; passes: FILM
+    projection passes where ellipsoids overlap (the creases at the hips and knees);
+    gravity [m/s^2] (3,); mu: Coulomb coefficient >= 0 of the contact (0: frictionless);
+    offset: contact thickness [m] >= 0; safety: dt as this fraction (0, 1]
     of the stable step; max_speed: node speeds are clipped to this [m/s] > 0 after every
     step (the strain limit and the contact projection turn position corrections into
     velocities: a large start strain would otherwise fling nodes off); record_every: a
@@ -422,6 +425,8 @@ class Relaxation:
     alpha: float = 10.0
     beta: float = 0.0
     max_stretch: float | None = 0.1
+    limit_sweeps: int = 10
+    passes: int = 10
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     mu: float = 0.0
     offset: float = 5e-4
@@ -442,6 +447,12 @@ class Relaxation:
         g = np.asarray(self.gravity, dtype=float)
         if g.shape != (3,) or not np.all(np.isfinite(g)):
             raise ValueError(f"Relaxation gravity must be 3 finite numbers, got {self.gravity!r}")
+        if int(self.limit_sweeps) != self.limit_sweeps or self.limit_sweeps < 1:
+            raise ValueError(
+                f"Relaxation limit_sweeps must be an integer >= 1, got {self.limit_sweeps!r}"
+            )
+        if int(self.passes) != self.passes or self.passes < 1:
+            raise ValueError(f"Relaxation passes must be an integer >= 1, got {self.passes!r}")
         if int(self.record_every) != self.record_every or self.record_every < 1:
             raise ValueError("Relaxation record_every must be an integer >= 1")
 
@@ -540,9 +551,9 @@ def _model(*, network, fabric, x_start, ellipsoids, belt, belt_target, relax: Re
         damping=pm.Damping(alpha=relax.alpha, beta=relax.beta),
         strain_limit=None
         if relax.max_stretch is None
-        else pm.StrainLimit(max_stretch=relax.max_stretch),
+        else pm.StrainLimit(max_stretch=relax.max_stretch, iterations=relax.limit_sweeps),
         bodies=growing_bodies(ellipsoids=ellipsoids, growth=relax.growth),
-        contact=FilmParameters(mu=relax.mu, offset=relax.offset),
+        contact=FilmParameters(mu=relax.mu, offset=relax.offset, max_passes=relax.passes),
     )
 
 
@@ -805,12 +816,16 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--mu", type=float, default=0.0, help="contact friction coefficient")
     p.add_argument("--no-gravity", action="store_true", help="relax without gravity")
     p.add_argument("--tol", type=float, default=1e-6, help="gap tolerance of the check [m]")
+    p.add_argument(
+        "--strain-check", type=float, default=0.5, help="largest structural/shear strain [-]"
+    )
     return p
 
 
 def _options(args: argparse.Namespace) -> tuple[PantsFit, Relaxation]:
     """The parameters of the arguments (ValueError with a one-line message if invalid)."""
     _finite("--tol [m]", args.tol, strict=False)
+    _finite("--strain-check", args.strain_check)
     fit = PantsFit(
         ease=args.ease, waist_height=args.waist_height, n_around=args.n_around, n_along=args.n_along
     )
@@ -870,7 +885,10 @@ def _write(out: Path, d: PantsDonning, summ: dict, meta: dict) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line (module docstring); 0 if every node ends outside the body, 1 if
+    not, 2 for invalid arguments (nothing written)."""
     from clothfem.body.lower_body import lower_body_from_c3d
+    from clothfem.pants_mesh import pants_lattice
 
     args = _parser().parse_args(argv)
     out = Path(args.out)
@@ -878,7 +896,7 @@ def main(argv: list[str] | None = None) -> int:
         fit, relax = _options(args)
         _check_out(out, args.overwrite)
         body = lower_body_from_c3d(args.c3d)
-        fit_pants(body=body, frame=args.frame, fit=fit)
+        pants_lattice(**fit_pants(body=body, frame=args.frame, fit=fit).geometry)
     except ValueError as exc:
         print(f"clothfem.particle.donning: error: {exc}", file=sys.stderr)
         return 2
@@ -893,15 +911,18 @@ def main(argv: list[str] | None = None) -> int:
         relax=str(asdict(relax)),
     )
     _write(out, d, summ, meta)
-    ok = summ["inside_end"] == 0
+    stretch = max(summ["strain_max_structural"], summ["strain_max_shear"])
+    inside = summ["inside_end"]
     print(
         f"{summ['nodes']} nodes, {summ['steps']} steps (dt {summ['dt']:.3e} s), "
         f"{summ['wall_seconds']:.1f} s; min gap {1e3 * summ['min_gap']:.3f} mm "
-        f"({'all nodes outside' if ok else str(summ['inside_end']) + ' nodes inside'}); "
-        f"structural strain {summ['strain_min_structural']:.3f} .. "
-        f"{summ['strain_max_structural']:.3f}; wrote {out / 'donned.npz'}"
+        f"({inside} nodes inside by more than {args.tol:g} m); strain structural "
+        f"{summ['strain_min_structural']:.3f} .. {summ['strain_max_structural']:.3f}, shear "
+        f"{summ['strain_min_shear']:.3f} .. {summ['strain_max_shear']:.3f}; wrote {out}"
     )
-    return 0 if ok else 1
+    if stretch > args.strain_check:
+        print(f"check failed: a spring is stretched {stretch:.3f} > {args.strain_check:g}")
+    return 0 if inside == 0 and stretch <= args.strain_check else 1
 
 
 if __name__ == "__main__":
