@@ -5,6 +5,7 @@
     clothfem validate SCENE.toml [--set key=value ...]
     clothfem schema            # the scene reference (docs/scene.md)
     clothfem plot RUN_DIR [RUN_DIR ...] [--out PNG] [--label NAME ...] [--y torque_flex]
+                  [--x time]
     clothfem report RUN_DIR [--markdown FILE]
 
 Works under ``mpirun -n N``; plot and report need neither MPI nor PETSc (docs/cli.md).
@@ -55,6 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     plot.add_argument("--out", default=None, metavar="PNG", help="default RUN_DIR/torque_angle.png")
     plot.add_argument("--label", action="extend", nargs="+", default=[], metavar="NAME")
     plot.add_argument("--y", choices=["torque_mag", "torque_flex"], default="torque_mag")
+    plot.add_argument("--x", choices=["angle", "time"], default="angle")
     plot.add_argument("--title", default=None)
     rep = sub.add_parser("report", help="short Markdown report of a run folder")
     rep.add_argument("run_dir", metavar="RUN_DIR")
@@ -114,7 +116,7 @@ def _post(args: argparse.Namespace) -> int:
     try:
         if args.command == "plot":
             png = report.plot_runs(
-                args.run_dirs, args.out, labels=args.label, y=args.y, title=args.title
+                args.run_dirs, args.out, labels=args.label, y=args.y, x=args.x, title=args.title
             )
             print(png)
             return 0

@@ -408,15 +408,20 @@ def plot_runs(
     *,
     labels: Sequence[str] | None = None,
     y: str = "torque_mag",
+    x: str = "angle",
     title: str | None = None,
 ) -> Path:
-    """Torque [N m] against angle [deg], one line per run folder; returns the PNG written.
+    """Torque [N m] against angle [deg] (``x = "time"``: against time [s], a recorded motion,
+    with the first run's gait events of ``events.csv`` marked), one line per run folder;
+    returns the PNG written.
 
-    ``y = "torque_flex"`` plots -tau . hinge axis. Default ``out``: ``RUN_DIR/torque_angle.png``
-    for one run, ``./torque_angle_compare.png`` for several.
+    ``y = "torque_flex"`` plots -tau . flexion axis. Default ``out``:
+    ``RUN_DIR/torque_angle.png`` for one run, ``./torque_angle_compare.png`` for several.
     """
     if y not in ("torque_mag", "torque_flex"):
         raise ReportError(f"--y must be torque_mag or torque_flex, not {y!r}")
+    if x not in ("angle", "time"):
+        raise ReportError(f"--x must be angle or time, not {x!r}")
     if labels and len(labels) != len(run_dirs):
         raise ReportError(f"{len(labels)} --label value(s) for {len(run_dirs)} run folder(s)")
     runs = []
@@ -425,6 +430,8 @@ def plot_runs(
         if y not in h:
             raise ReportError(f"{Path(d) / 'history.csv'}: missing column {y!r}")
         a, t = torque_curve(h, y)
+        if x == "time":
+            a = torque_curve(h, "time")[1]
         name = labels[i] if labels else Path(d).resolve().name
         runs.append((a, -t if y == "torque_flex" else t, name + _stopped_note(h, read_summary(d))))
     if out is None:
@@ -439,10 +446,17 @@ def plot_runs(
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for a, t, name in runs:
-        ax.plot(a, t, "o-", ms=3, label=name)
-    ax.set_xlabel("flexion angle [deg]")
-    ax.set_ylabel("torque -tau . hinge axis [N m]" if y == "torque_flex" else "torque |tau| [N m]")
-    ax.set_title(title or (runs[0][2] if len(runs) == 1 else "torque-angle"))
+        ax.plot(a, t, "o-" if x == "angle" else "-", ms=3, label=name)
+    for t_event, context, label in _events(run_dirs[0]) if x == "time" else ():
+        ax.axvline(t_event, color="0.6", lw=0.8, ls=":")
+        short = context[:1] + "".join(w[0] for w in label.split())  # Right Foot Strike: RFS
+        ax.text(t_event, 0.98, f" {short}", transform=ax.get_xaxis_transform(), va="top",
+                fontsize=7, color="0.4")  # fmt: skip
+    ax.set_xlabel("flexion angle [deg]" if x == "angle" else "time [s]")
+    ax.set_ylabel(
+        "torque -tau . flexion axis [N m]" if y == "torque_flex" else "torque |tau| [N m]"
+    )
+    ax.set_title(title or (runs[0][2] if len(runs) == 1 else f"torque-{x}"))
     ax.grid(True)
     ax.legend()
     fig.tight_layout()
@@ -450,6 +464,15 @@ def plot_runs(
     fig.savefig(out, dpi=120)
     plt.close(fig)
     return out
+
+
+def _events(run_dir: str | Path) -> list[tuple[float, str, str]]:
+    """``RUN_DIR/events.csv`` as (time [s], context, label); empty if there is none."""
+    path = Path(run_dir) / "events.csv"
+    if not path.is_file():
+        return []
+    with path.open() as fh:
+        return [(float(r["time_s"]), r["context"], r["label"]) for r in csv.DictReader(fh)]
 
 
 def _fmt(x: float | None, spec: str = ".4g") -> str:

@@ -170,6 +170,17 @@ def test_plot_compare_in_cwd(tmp_path, monkeypatch, capsys):
     assert capsys.readouterr().err.count("\n") == 1
 
 
+def test_plot_against_time_reads_the_events(tmp_path, capsys):
+    """--x time: the events of events.csv are read back (time, context, label)."""
+    d = _run(tmp_path / "walk")
+    (d / "events.csv").write_text("time_s,context,label\n0.25,Right,Foot Strike\n")
+    assert R._events(d) == [(0.25, "Right", "Foot Strike")]
+    assert R._events(tmp_path) == []
+    assert main(["plot", str(d), "--x", "time", "--out", str(tmp_path / "t.png")]) == 0
+    assert (tmp_path / "t.png").stat().st_size > 0
+    assert main(["plot", str(d), "--x", "angle", "--y", "torque_flex"]) == 0
+
+
 def test_report_text(tmp_path, capsys):
     d = _run(tmp_path / "run", summary=STOPPED)
     md = tmp_path / "r.md"
