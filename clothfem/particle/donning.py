@@ -26,9 +26,18 @@ Units SI (m, s, kg); body frame of :mod:`clothfem.body.lower_body` (Z up). Seria
 
     .venv/bin/python -m clothfem.particle.donning --out DIR [--n-around 8 --n-along 8 ...]
 
-writes ``DIR/donned.npz`` (``X``, ``x``, ``gap`` ... in the node order of the pants'
-SurfaceMesh, i.e. of :func:`clothfem.particle.network_from_mesh`: gmsh node tag - 1) and
-``DIR/donning_log.txt``.
+writes ``DIR/donned.npz`` and ``DIR/donning_log.txt``. The npz holds, row i = the pants
+mesh's node of gmsh tag i + 1 (the order of :func:`clothfem.particle.network_from_mesh`,
+the same on any number of ranks): ``X`` (n, 3) the pattern (reference) positions [m], ``x``
+(n, 3) the donned positions [m] in the recording's coordinates, ``gap`` (n,) the signed gap
+to the full-size body [m] (< 0 inside), ``x_start`` (n, 3) the skinned positions [m],
+``segment`` (n,) the index into ``segment_names`` of each node's nearest ellipsoid,
+``waist`` the belt nodes; and scalars: ``mesh_<key>`` the pants' [mesh] keys (to build the
+same mesh in a scene), the check results of :func:`summary`, ``c3d``, ``frame``,
+``commit``, ``fit`` and ``relax``. The log has the same scalars as ``# key = value`` lines,
+then a CSV of progress rows. Exit code 0 when every node ends outside the body (gap >=
+-``--tol``) and no structural or shear spring is stretched more than ``--strain-check``,
+1 when not, 2 for invalid arguments (nothing written).
 """
 
 from __future__ import annotations
@@ -866,7 +875,8 @@ def _commit() -> str:
 
 def _write(out: Path, d: PantsDonning, summ: dict, meta: dict) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    scalars = {k: np.asarray(v) for k, v in {**meta, **summ}.items()}
+    mesh = {f"mesh_{k}": v for k, v in d.pattern.geometry.items()}  # [mesh] keys of a scene
+    scalars = {k: np.asarray(v) for k, v in {**meta, **mesh, **summ}.items()}
     np.savez(
         out / "donned.npz",
         X=d.network.x0,
@@ -878,7 +888,7 @@ def _write(out: Path, d: PantsDonning, summ: dict, meta: dict) -> None:
         waist=d.belt,
         **scalars,
     )
-    lines = [f"# {k} = {v}" for k, v in {**meta, **summ}.items()]
+    lines = [f"# {k} = {v!r}" for k, v in {**meta, **mesh, **summ}.items()]
     lines.append("t_s,radius_scale,min_gap_m,contact_nodes,max_strain")
     lines += [f"{t:.6g},{s:.6g},{g:.6g},{a},{e:.6g}" for t, s, g, a, e in d.result.rows]
     (out / "donning_log.txt").write_text("\n".join(lines) + "\n")
@@ -907,7 +917,6 @@ def main(argv: list[str] | None = None) -> int:
         frame=args.frame,
         commit=_commit(),
         fit=str(asdict(fit)),
-        pants=str(d.pattern.geometry),
         relax=str(asdict(relax)),
     )
     _write(out, d, summ, meta)
