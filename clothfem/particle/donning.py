@@ -66,6 +66,8 @@ __all__ = [
     "body_gaps",
     "don",
     "don_pants",
+    "ring_windings",
+    "winding_number",
     "fit_pants",
     "growing_bodies",
     "skin",
@@ -769,9 +771,50 @@ def don_pants(
     )
 
 
+def winding_number(*, x: FloatArray, centre: FloatArray, axis: FloatArray) -> float:
+    """How many times the closed polygon x (k, 3) [m] (in ring order) turns about the line
+    through ``centre`` [m] along ``axis``: +-1 for a ring round it, 0 for one beside it (a
+    leg of the pants caught on the wrong side of a limb shows as 0)."""
+    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    u = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(a, u)
+    r = np.asarray(x, dtype=float) - centre
+    ang = np.arctan2(r @ v, r @ u)
+    turn = np.diff(np.concatenate([ang, ang[:1]]))
+    return float(np.sum((turn + math.pi) % (2.0 * math.pi) - math.pi) / (2.0 * math.pi))
+
+
+def _ring(X: FloatArray, nodes: NDArray[np.intp], cx: float) -> NDArray[np.intp]:
+    """The boundary nodes in ring order (by pattern angle about the vertical x = cx, y = 0)."""
+    return nodes[np.argsort(np.arctan2(X[nodes, 1], X[nodes, 0] - cx))]
+
+
+def ring_windings(d: PantsDonning) -> dict:
+    """Winding numbers of the donned hems about each shank axis (own: +-1, other: 0) and of
+    the waist about the pelvis' vertical axis (+-1)."""
+    net, x = d.network, d.result.x
+    bones = {b.name: b for b in d.pattern.bones}
+    half = 0.5 * d.pattern.geometry["leg_spacing"]
+    out = {}
+    for side, cx in (("L", half), ("R", -half)):
+        ring = _ring(net.x0, net.nodes(f"{'left' if side == 'L' else 'right'}_hem"), cx)
+        for other in ("L", "R"):
+            b = bones[f"{other}_shank"]
+            w = winding_number(x=x[ring], centre=b.body_origin, axis=b.body_frame[:, 0])
+            out[f"winding_{side}_hem_about_{other}_shank"] = round(w, 6)
+    p = bones["pelvis"]
+    ring = _ring(net.x0, net.nodes("waist"), 0.0)
+    out["winding_waist_about_pelvis"] = round(
+        winding_number(x=x[ring], centre=p.body_origin, axis=p.body_frame[:, 2]), 6
+    )
+    return out
+
+
 def summary(d: PantsDonning, *, tol: float) -> dict:
     """Scalar results of a donning: nodes, steps, dt [s], wall [s], min gap [m] overall
-    and per segment, nodes inside (gap < -tol) at the start and end, strain ranges [-]."""
+    and per segment, nodes inside (gap < -tol) at the start and end, strain ranges [-],
+    winding numbers of the hems and the waist (:func:`ring_windings`)."""
     from clothfem.particle.network import KIND_NAMES
 
     net, r = d.network, d.result
@@ -796,7 +839,7 @@ def summary(d: PantsDonning, *, tol: float) -> dict:
     for kind, code in KIND_NAMES.items():
         e = d.strain[net.kind == code]
         out[f"strain_min_{kind}"], out[f"strain_max_{kind}"] = float(e.min()), float(e.max())
-    return out
+    return out | ring_windings(d)
 
 
 # --------------------------------------------------------------------------------------------
@@ -922,6 +965,14 @@ def main(argv: list[str] | None = None) -> int:
     _write(out, d, summ, meta)
     stretch = max(summ["strain_max_structural"], summ["strain_max_shear"])
     inside = summ["inside_end"]
+    wound = (
+        all(
+            abs(abs(summ[f"winding_{s}_hem_about_{o}_shank"]) - (s == o)) < 1e-6
+            for s in ("L", "R")
+            for o in ("L", "R")
+        )
+        and abs(abs(summ["winding_waist_about_pelvis"]) - 1.0) < 1e-6
+    )
     print(
         f"{summ['nodes']} nodes, {summ['steps']} steps (dt {summ['dt']:.3e} s), "
         f"{summ['wall_seconds']:.1f} s; min gap {1e3 * summ['min_gap']:.3f} mm "
@@ -931,7 +982,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     if stretch > args.strain_check:
         print(f"check failed: a spring is stretched {stretch:.3f} > {args.strain_check:g}")
-    return 0 if inside == 0 and stretch <= args.strain_check else 1
+    if not wound:
+        print("check failed: a hem or the waist does not go round its own limb once")
+    return 0 if inside == 0 and stretch <= args.strain_check and wound else 1
 
 
 if __name__ == "__main__":

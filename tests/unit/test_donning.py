@@ -182,6 +182,17 @@ def test_donning_a_tube_that_already_fits_leaves_it_unchanged():
     assert dn.body_gaps(x=res.x, ellipsoids=[ell])[0].min() > 0.009
 
 
+def test_winding_number_of_rings_about_a_line():
+    t = np.linspace(0, 2 * np.pi, 17)[:-1]
+    R = _rotation([1.0, -0.5, 2.0], 1.2)
+    axis, centre = R[:, 2], np.array([0.3, -0.2, 0.5])
+    ring = centre + (0.1 * np.stack([np.cos(t), np.sin(t), 0.3 * np.sin(3 * t)], 1)) @ R.T
+    assert dn.winding_number(x=ring, centre=centre, axis=axis) == pytest.approx(1.0)
+    assert dn.winding_number(x=ring[::-1], centre=centre, axis=axis) == pytest.approx(-1.0)
+    beside = centre + 0.25 * R[:, 0]  # a parallel line outside the ring
+    assert dn.winding_number(x=ring, centre=beside, axis=axis) == pytest.approx(0.0, abs=1e-12)
+
+
 def test_simple_fabric_on_a_square_grid():
     net = pm.regular_patch(length=0.2, width=0.1, nx=4, ny=2)
     E, G, rho, t = 1.2e6, 1e5, 436.0, 1e-3
@@ -241,6 +252,12 @@ def test_coarse_pants_donned_on_the_first_frame_end_outside_the_body(body, pants
     assert int(data["inside_start_full"]) > 0  # the skinned pants start partly inside ...
     assert int(data["inside_start_small"]) == 0  # ... but outside the shrunk colliders
     assert float(data["strain_max_structural"]) < 0.5
+    # each hem goes once round its own shank and not round the other; the waist round the hips
+    for s in ("L", "R"):
+        for o in ("L", "R"):
+            assert abs(float(data[f"winding_{s}_hem_about_{o}_shank"])) == (s == o)
+    assert abs(float(data["winding_waist_about_pelvis"])) == 1.0
+    assert float(data["mesh_leg_spacing"]) >= 2.2 * float(data["mesh_leg_radius"])
     log = (out / "donning_log.txt").read_text().splitlines()
     assert any(line.startswith("# min_gap = ") for line in log)
     assert "t_s,radius_scale,min_gap_m,contact_nodes,max_strain" in log
