@@ -1226,9 +1226,14 @@ def integrate_explicit(
     clock: tuple[float, int, float, int] | None = None,
     measure: Callable[[int, float], bool] | None = None,
     work: tuple[float, float] = (0.0, 0.0),
+    damping_until: float = math.inf,
 ) -> tuple[list[DynamicStep], StableStep]:
     """Central difference (velocity Verlet) with the lumped mass, fixed step (or shrinking
     with the state's stable step, ``recheck_every``).
+
+    ``damping`` acts on the steps that end at t <= ``damping_until`` [s] only (e.g. the
+    dynamic relaxation of a started state while the body rests); the damping work stays in
+    the records.
 
     ``measure(step, t)``: whether the record of the step to ``t`` carries the strain energy
     (one assembly of the energy form, ~10 % of a sleeve step); other steps' records have
@@ -1309,10 +1314,12 @@ def integrate_explicit(
 
     singular = [False]  # a lumped rotary block was singular on this rank
 
+    damp = [damping.active]  # damping on the current step (set below from the start time)
+
     def accel(x, vpred, lam, a) -> None:
         s.forces(x, lam, r, fe)  # state at x
         ra = -r.getArray(readonly=True)
-        if damping.active:
+        if damp[0]:
             ra = ra - _damp(vpred)
         try:
             aa = s.lumped_solve(ra)
@@ -1346,12 +1353,14 @@ def integrate_explicit(
             raise ValueError(f"first_step {first_step} is past the last step {n_end}")
     else:
         t_base, step_base, h, n_end = float(clock[0]), int(clock[1]), float(clock[2]), int(clock[3])
-    lam = lam_of(t_base + (first_step - step_base) * h)
+    t_start = t_base + (first_step - step_base) * h
+    damp[0] = damping.active and t_start < damping_until * (1 - 1e-12)
+    lam = lam_of(t_start)
     a = x.duplicate()
     accel(x, v, lam, a)  # also leaves the forces at x for the energy bookkeeping
     if acceleration is not None:
         acceleration.copy(a)
-    energy = _Energy(s, x, v, a, lam, damping, K0, lumped=True)
+    energy = _Energy(s, x, v, a, lam, damping if damp[0] else Damping(), K0, lumped=True)
     energy.W_ext, energy.W_damp = (float(w) for w in work)
     r, fe = energy.r, energy.fe  # accel() fills them: no second assembly per step
     energy.ready = True
@@ -1380,6 +1389,9 @@ def integrate_explicit(
         t0 = time.perf_counter()
         t = t_base + (step - step_base) * h
         lam = lam_of(t)
+        if damp[0] and t > damping_until * (1 + 1e-12):  # from this step on: undamped
+            damp[0] = False
+            energy.damping = Damping()
         x.copy(xo)
         v.axpy(0.5 * h, a)  # v: the half-step velocity v_n+1/2 (leapfrog form of the update)
         x.axpy(h, v)  # x + h v_n + h^2/2 a_n: the contact-free predictor (Eq. 23)

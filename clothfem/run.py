@@ -421,6 +421,12 @@ def _inertia_log(sv: dict[str, Any]) -> str:
                 else " (at t = 0)"
             )
             + f", rotary inertia x {sv['rotary_scale']:g}"
+            + (
+                f", mass damping {sv['settle_damping']:g} 1/s until {sv['settle_time']:g} s "
+                "(settling only)"
+                if sv["settle_damping"] > 0
+                else ""
+            )
         )
     return (
         f"inertia: consistent mass, Newmark gamma {sv['gamma']:g}, dt {sv['dt']:g} s, "

@@ -1180,6 +1180,7 @@ def _run_explicit(
     from .contact.film import FilmContact, FilmParameters
     from .contact.self_contact import SelfContact
     from .dynamics import (
+        Damping,
         DynamicsDivergence,
         ShellSystem,
         StableStep,
@@ -1433,6 +1434,8 @@ def _run_explicit(
                 acceleration=start["a"],
                 on_state=on_state,
                 measure=lambda _k, t: ends_row(t),  # the strain energy only for the rows
+                damping=Damping(mass=sv["settle_damping"]),
+                damping_until=t_settle,
             )
             snapshot("final", t_end)
         except (DynamicsDivergence, FloatingPointError) as exc:

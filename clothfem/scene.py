@@ -405,6 +405,14 @@ SCHEMA: dict[str, Section] = {
                 default=0.2,
                 lo=0.0,
             ),
+            "settle_damping": Key(
+                "float",
+                "explicit: mass-proportional damping [1/s] during the settling only (dynamic "
+                "relaxation of a started state, e.g. donned pants, before the motion; the "
+                "motion itself is undamped); 0 = none",
+                default=0.0,
+                lo=0.0,
+            ),
             "ramp_time": Key(
                 "float",
                 "newmark, explicit: time [s] over which the loads (gravity) ramp up",
@@ -826,6 +834,8 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
     _validate_mocap(out, base=None if base is None else Path(base))
     _validate_initial(out, base=None if base is None else Path(base))
     _validate_duration(out)
+    if out["solver"]["settle_damping"] > 0 and out["solver"]["integrator"] != "explicit":
+        _fail("solver.settle_damping", "is a parameter of solver.integrator = 'explicit' only")
     return out
 
 

@@ -460,3 +460,31 @@ def test_rayleigh_damping_sdof(method):
     E0 = 0.5 * w * w
     assert recs[-1].damping_work == pytest.approx(E0 - recs[-1].total, rel=1e-2)
     assert abs(recs[-1].dissipation) < 1e-2 * recs[-1].damping_work
+
+
+def test_damping_until_switches_to_the_free_oscillation():
+    """Central difference with mass damping a0 for t <= T1 only, on x'' + a0 x' + w^2 x = 0:
+    at T1 the state is the damped solution; afterwards the undamped oscillation from that
+    state (amplitude constant, energy constant), and the damping work stops growing."""
+    w, a0, T1, t_end = 2.0, 0.4, 1.5, 4.0
+    xi = a0 / (2 * w)
+    wd = w * math.sqrt(1 - xi * xi)
+
+    def damped(t: float) -> tuple[float, float]:
+        e = math.exp(-xi * w * t)
+        x = e * (math.cos(wd * t) + xi * w / wd * math.sin(wd * t))
+        v = -e * (w * w / wd) * math.sin(wd * t)
+        return x, v
+
+    x1, v1 = damped(T1)
+    exact = x1 * math.cos(w * (t_end - T1)) + v1 / w * math.sin(w * (t_end - T1))
+    s = _sdof(k=w * w)
+    recs, _ = dy.integrate_explicit(
+        s, t_end=t_end, dt=0.001, damping=dy.Damping(mass=a0), damping_until=T1
+    )
+    assert _value(s) == pytest.approx(exact, abs=2e-3)
+    E1 = 0.5 * (v1 * v1 + w * w * x1 * x1)
+    after = [r for r in recs if r.time > T1 + 0.01]
+    assert max(abs(r.total - E1) for r in after) < 2e-3 * E1
+    assert after[-1].damping_work == pytest.approx(after[0].damping_work, rel=1e-12)
+    assert after[0].damping_work == pytest.approx(0.5 * w * w - E1, rel=1e-2)
