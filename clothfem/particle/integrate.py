@@ -59,7 +59,7 @@ class StepInfo:
     fabric [N] (sum over nodes, (3,)); smallest gap after the correction [m] (inf without
     contact); strain-limit sweeps; Newton iterations (0 for explicit); the contact force on
     the fabric at every node [N] ((n, 3), zero off contact; the body gets its negative, as
-    in Eq. 28)."""
+    in Eq. 28) and the ellipsoid each node touches ((n,), -1: none)."""
 
     t: float
     active: int
@@ -68,6 +68,7 @@ class StepInfo:
     limit_sweeps: int
     newton: int
     node_force: FloatArray
+    node_body: NDArray[np.intp]
 
 
 def bodies(source):
@@ -124,9 +125,9 @@ def limit_strain(model: ParticleModel, x: FloatArray) -> int:
 
 def _contact(model: ParticleModel, x: FloatArray, v: FloatArray, t: float, dt: float):
     """FILM correction (in place) of the predictor; returns (active, force sum, min gap,
-    nodal forces on the fabric)."""
+    nodal forces on the fabric, contact ellipsoid per node or -1)."""
     if model.bodies is None:
-        return 0, np.zeros(3), math.inf, np.zeros_like(x)
+        return 0, np.zeros(3), math.inf, np.zeros_like(x), np.full(len(x), -1, dtype=np.intp)
     from clothfem.contact.explicit import film_step
 
     geo, vel = model.bodies(t)
@@ -140,7 +141,9 @@ def _contact(model: ParticleModel, x: FloatArray, v: FloatArray, t: float, dt: f
     gap = float(np.min(res.gap[~model.fixed], initial=math.inf))
     nodal = np.zeros_like(x)
     nodal[act] = res.force[act]
-    return act.size, nodal[act].sum(axis=0), gap, nodal
+    body = np.full(len(x), -1, dtype=np.intp)
+    body[act] = res.body[act]
+    return act.size, nodal[act].sum(axis=0), gap, nodal, body
 
 
 def _finish(model, x_old, x, v_half, t1, dt) -> tuple[int, tuple]:
@@ -157,12 +160,12 @@ def step_explicit(model: ParticleModel, state: ParticleState, dt: float) -> tupl
     v_half = state.v + 0.5 * dt * state.a
     x = state.x + dt * v_half
     t1 = state.t + dt
-    sweeps, (act, force, gap, nodal) = _finish(model, state.x, x, v_half, t1, dt)
+    sweeps, (act, force, gap, nodal, body) = _finish(model, state.x, x, v_half, t1, dt)
     a = accelerations(model, x, v_half)
     v = v_half + 0.5 * dt * a
     v[model.fixed] = v_half[model.fixed]
     new = ParticleState(t=t1, x=x, v=v, a=a)
-    return new, StepInfo(t1, act, force, gap, sweeps, 0, nodal)
+    return new, StepInfo(t1, act, force, gap, sweeps, 0, nodal, body)
 
 
 def step_implicit(
@@ -192,9 +195,9 @@ def step_implicit(
         J = (diags(m3) - dt * C - dt * dt * K).tocsr()[free][:, free]
         v.reshape(-1)[free] -= spsolve(J.tocsc(), r)
     x = x0 + dt * v
-    sweeps, (act, force, gap, nodal) = _finish(model, x0, x, v, t1, dt)
+    sweeps, (act, force, gap, nodal, body) = _finish(model, x0, x, v, t1, dt)
     new = ParticleState(t=t1, x=x, v=v, a=accelerations(model, x, v))
-    return new, StepInfo(t1, act, force, gap, sweeps, newton, nodal)
+    return new, StepInfo(t1, act, force, gap, sweeps, newton, nodal, body)
 
 
 def _check_dt(dt: float) -> None:

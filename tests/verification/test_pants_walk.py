@@ -26,17 +26,26 @@ COMM = MPI.COMM_WORLD
 SCENE = Path(__file__).resolve().parents[2] / "demos" / "scenes" / "pants_walk.toml"
 
 
-def test_pants_walk_small(tmp_path):
-    base = Path(COMM.bcast(str(tmp_path) if COMM.rank == 0 else None, root=0))
-    don = base / "donned"
+@pytest.fixture(scope="module")
+def donned(tmp_path_factory) -> Path:
+    """The coarse donning (8 x 6 cells), run once on rank 0."""
+    base = tmp_path_factory.mktemp("donned") if COMM.rank == 0 else None
+    base = Path(COMM.bcast(str(base) if base is not None else None, root=0))
     code = None
     if COMM.rank == 0:
-        code = donning.main(["--out", str(don), "--n-around", "8", "--n-along", "6"])
+        code = donning.main(
+            ["--out", str(base), "--overwrite", "--n-around", "8", "--n-along", "6"]
+        )
     assert COMM.bcast(code, root=0) == 0
-    gap = np.load(don / "donned.npz")["gap"]
+    return base / "donned.npz"
+
+
+def test_pants_walk_small(tmp_path, donned):
+    base = Path(COMM.bcast(str(tmp_path) if COMM.rank == 0 else None, root=0))
+    gap = np.load(donned)["gap"]
     assert gap.min() >= -1e-6  # every node outside the body at the start of the walk
     sets = [
-        f"initial.positions={don / 'donned.npz'}",
+        f"initial.positions={donned}",
         "mesh.n_around=8",
         "mesh.n_along=6",
         "solver.duration=0.25",
@@ -53,3 +62,22 @@ def test_pants_walk_small(tmp_path):
     assert np.all(h["n_active"] > 0)  # on the body from the first row
     assert np.all(np.isfinite(h["torque_flex"]))
     assert np.any(h["torque_mag"][h["stage"] == "motion"] > 0.0)
+
+
+@pytest.mark.serial
+def test_particle_walk_small(tmp_path, donned):
+    """The same walk with the particle fabric (python -m clothfem.particle.walk): one row per
+    0.01 s, on the body from the first row, the events on the run's clock, a knee torque
+    once the walk starts."""
+    from clothfem.particle import walk
+
+    sets = ["mesh.n_around=8", "mesh.n_along=6", "solver.duration=0.25"]
+    args = ["--donned", str(donned), "--out", str(tmp_path / "p")]
+    assert walk.main([*args, *[a for kv in sets for a in ("--set", kv)]]) == 0
+    h = read_history(tmp_path / "p" / "history.csv")
+    assert len(h["time"]) == 25 and np.all(h["n_active"] > 0)
+    assert np.all(np.isfinite(h["torque_flex"]))
+    assert np.any(h["torque_mag"][h["stage"] == "motion"] > 0.0)
+    events = (tmp_path / "p" / "events.csv").read_text().splitlines()
+    assert events[0] == "time_s,context,label" and events[1].startswith("0.2905")
+    assert walk.main([*args, "--set", "solver.duration=0.1"]) == 2  # the folder is not empty
