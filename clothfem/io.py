@@ -551,13 +551,16 @@ def animate_series(
 
 class Progress:
     """Progress of a run on rank 0: a bar with the elapsed time and an ETA (``rich``) on a
-    terminal, plain lines (with the ETA) otherwise; nothing on the other ranks."""
+    terminal, plain lines (with the ETA) otherwise and under ``mpirun`` (Open MPI and MPICH
+    give a rank's stdout a pseudo-terminal even when the output goes to a file, where a bar
+    would write every redraw); nothing on the other ranks."""
 
     def __init__(self, *, label: str, comm: MPI.Comm = MPI.COMM_WORLD, start: float = 0.0):
         self.on = comm.rank == 0
         self.t0, self.f0 = _time.perf_counter(), start
         self._bar = None
-        if self.on and sys.stdout.isatty():
+        launched = any(k in os.environ for k in ("OMPI_COMM_WORLD_SIZE", "PMI_SIZE"))
+        if self.on and sys.stdout.isatty() and not launched:
             try:
                 from rich.progress import (
                     BarColumn,
