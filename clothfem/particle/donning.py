@@ -399,7 +399,7 @@ class Growth:
     scaled by ``start + (1 - start) smoothstep(t / time)``; start in (0, 1] [-], time [s] > 0
     (the growth); the full size is kept afterwards."""
 
-    start: float = 0.1
+    start: float = 0.3
     time: float = 0.4
 
     def __post_init__(self) -> None:
@@ -860,7 +860,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--n-along", type=int, default=8, help="rows of cells along each leg")
     p.add_argument("--ease", type=float, default=0.015, help="radial ease [m]")
     p.add_argument("--waist-height", type=float, default=0.5, help="waist above hips / r3")
-    p.add_argument("--start-scale", type=float, default=0.1, help="initial radius scale")
+    p.add_argument("--start-scale", type=float, default=0.3, help="initial radius scale")
     p.add_argument("--grow-time", type=float, default=0.4, help="growth time [s]")
     p.add_argument("--settle-time", type=float, default=0.2, help="settling after it [s]")
     p.add_argument("--alpha", type=float, default=10.0, help="mass damping [1/s]")
