@@ -49,9 +49,15 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from clothfem.body import Ellipsoid
+    from clothfem.body.lower_body import LowerBody
+    from clothfem.particle import ParticleFabric, ParticleModel, ParticleState, SpringNetwork
 
 __all__ = [
     "Bone",
@@ -66,14 +72,14 @@ __all__ = [
     "body_gaps",
     "don",
     "don_pants",
-    "ring_windings",
-    "winding_number",
     "fit_pants",
     "growing_bodies",
-    "skin",
+    "ring_windings",
     "simple_fabric",
+    "skin",
     "spring_strains",
     "summary",
+    "winding_number",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -219,7 +225,7 @@ def _ellipse_perimeter(a: float, b: float) -> float:
     return math.pi * (a + b) * (1.0 + 3.0 * h / (10.0 + math.sqrt(4.0 - 3.0 * h)))
 
 
-def _frame_data(body, frame: int) -> dict:
+def _frame_data(body: LowerBody, frame: int) -> dict:
     """Joint centres, rotations and radii of a :class:`LowerBody` at row ``frame``."""
     n = body.frames["pelvis"].times.size
     if int(frame) != frame or not 0 <= frame < n:
@@ -286,64 +292,76 @@ def _leg_lengths(d: dict) -> dict:
     }
 
 
-def fit_pants(*, body, frame: int = 0, fit: PantsFit = PantsFit()) -> PantsPattern:
-    """The pants pattern and skeleton fitted to ``body`` (a
-    :class:`clothfem.body.lower_body.LowerBody`) at row ``frame`` (module docstring)."""
-    d = _frame_data(body, frame)
+def _pants_geometry(d: dict, fit: PantsFit) -> tuple[dict, float, float]:
+    """Keyword arguments of :func:`clothfem.pants_mesh.pants` fitted to the frame data, the
+    waist height above the hip line h_w [m] and the pelvis bone's fore-aft shift [m]."""
     tor = _torso_dims(d, fit)
-    belt_c, belt_ax, h_w = _belt(d, fit)
-    legs = _leg_lengths(d)
+    belt_axes, h_w = _belt(d, fit)[1:]
     r_leg = tor["r_thigh"] + fit.ease
     spacing = max(2.2 * r_leg, 2.0 * (tor["half_width"] - r_leg))
     a = 0.5 * spacing + r_leg
-    depth = h_w + tor["crotch_drop"]
+    legs = _leg_lengths(d)
     inseam = min(t + s for t, s in legs.values()) - fit.hem_clearance - tor["crotch_drop"]
     geometry = dict(
-        waist_radius=_ellipse_perimeter(*belt_ax) / (2.0 * math.pi),
+        waist_radius=_ellipse_perimeter(*belt_axes) / (2.0 * math.pi),
         hip_radius=_ellipse_perimeter(a, tor["half_depth"]) / (2.0 * math.pi),
         leg_radius=r_leg,
         leg_length=inseam,
-        crotch_depth=depth,
+        crotch_depth=h_w + tor["crotch_drop"],
         leg_spacing=spacing,
         n_around=int(fit.n_around),
         n_along=int(fit.n_along),
     )
+    return geometry, h_w, tor["delta"]
+
+
+def _skeleton(d: dict, *, spacing: float, h_w: float, delta: float) -> tuple[list, dict]:
+    """The bones (pelvis, L_thigh, L_shank, R_thigh, R_shank) and the pattern knee heights
+    [m]: pelvis at the hip line (z = -h_w) to the mid-hip + delta e2; each pattern leg's hip
+    (x = +-spacing/2) to the hip centre, its knee (the thigh's length lower) to the knee."""
     Qp = d["pelvis"]["Q"]
     mid = 0.5 * (d["pelvis"]["j1"] + d["pelvis"]["j2"])
-    bones = [
-        Bone(
-            name="pelvis",
-            pattern_origin=np.array([0.0, 0.0, -h_w]),
-            pattern_frame=PATTERN_PELVIS,
-            body_origin=mid + tor["delta"] * Qp[:, 1],
-            body_frame=Qp,
-        )
-    ]
-    knee_z = {}
+    pelvis = Bone(
+        name="pelvis",
+        pattern_origin=np.array([0.0, 0.0, -h_w]),
+        pattern_frame=PATTERN_PELVIS,
+        body_origin=mid + delta * Qp[:, 1],
+        body_frame=Qp,
+    )
+    bones, knee_z = [pelvis], {}
     for s, sign in (("L", 1.0), ("R", -1.0)):
         hip = np.array([sign * 0.5 * spacing, 0.0, -h_w])
-        knee = hip - np.array([0.0, 0.0, legs[s][0]])
+        knee = hip - np.array([0.0, 0.0, _leg_lengths(d)[s][0]])
         knee_z[s] = float(knee[2])
         for seg, origin in (("thigh", hip), ("shank", knee)):
             dd = d[f"{s}_{seg}"]
-            bones.append(
-                Bone(
-                    name=f"{s}_{seg}",
-                    pattern_origin=origin,
-                    pattern_frame=PATTERN_LIMB,
-                    body_origin=dd["j1"],
-                    body_frame=dd["Q"],
-                )
+            bone = Bone(
+                name=f"{s}_{seg}",
+                pattern_origin=origin,
+                pattern_frame=PATTERN_LIMB,
+                body_origin=dd["j1"],
+                body_frame=dd["Q"],
             )
+            bones.append(bone)
+    return bones, knee_z
+
+
+def fit_pants(*, body: LowerBody, frame: int = 0, fit: PantsFit = PantsFit()) -> PantsPattern:
+    """The pants pattern and skeleton fitted to ``body`` (a
+    :class:`clothfem.body.lower_body.LowerBody`) at row ``frame`` (module docstring)."""
+    d = _frame_data(body, frame)
+    geometry, h_w, delta = _pants_geometry(d, fit)
+    bones, knee_z = _skeleton(d, spacing=geometry["leg_spacing"], h_w=h_w, delta=delta)
+    belt_centre, belt_axes, _ = _belt(d, fit)
     return PantsPattern(
         geometry=geometry,
         bones=tuple(bones),
         hip_z=-h_w,
         knee_z=knee_z,
-        pelvis_origin=mid,
-        pelvis_frame=Qp,
-        belt_centre=belt_c,
-        belt_axes=belt_ax,
+        pelvis_origin=0.5 * (d["pelvis"]["j1"] + d["pelvis"]["j2"]),
+        pelvis_frame=d["pelvis"]["Q"],
+        belt_centre=belt_centre,
+        belt_axes=belt_axes,
         fit=fit,
     )
 
@@ -473,11 +491,13 @@ class Relaxation:
         return max(self.growth.time, self.belt_time) + self.settle_time
 
 
-def _geometry(ellipsoids: Sequence) -> list[tuple[FloatArray, FloatArray, FloatArray]]:
+def _geometry(ellipsoids: Sequence[Ellipsoid]) -> list[tuple[FloatArray, FloatArray, FloatArray]]:
     return [(e.centre, e.axes.T, np.asarray(e.radii, dtype=float)) for e in ellipsoids]
 
 
-def growing_bodies(*, ellipsoids: Sequence, growth: Growth) -> Callable[[float], tuple[list, list]]:
+def growing_bodies(
+    *, ellipsoids: Sequence[Ellipsoid], growth: Growth
+) -> Callable[[float], tuple[list, list]]:
     """``t -> (ellipsoids (c, Q, r), velocities)`` for the FILM step: the ellipsoids at rest,
     radii scaled by ``growth.scale(t)`` (limb segments, names starting L_ or R_: r2, r3 only)."""
     geo = _geometry(ellipsoids)
@@ -495,7 +515,9 @@ def growing_bodies(*, ellipsoids: Sequence, growth: Growth) -> Callable[[float],
     return at
 
 
-def body_gaps(*, x: FloatArray, ellipsoids: Sequence) -> tuple[FloatArray, NDArray[np.intp]]:
+def body_gaps(
+    *, x: FloatArray, ellipsoids: Sequence[Ellipsoid]
+) -> tuple[FloatArray, NDArray[np.intp]]:
     """Signed gap [m] (< 0 inside) of every point x (n, 3) to the union of the ellipsoids,
     the smallest over them (the deepest penetration where inside), and that ellipsoid's
     index."""
@@ -505,7 +527,7 @@ def body_gaps(*, x: FloatArray, ellipsoids: Sequence) -> tuple[FloatArray, NDArr
     return np.asarray(pr.gap, dtype=float), np.asarray(pr.body, dtype=np.intp)
 
 
-def spring_strains(*, network, x: FloatArray) -> FloatArray:
+def spring_strains(*, network: SpringNetwork, x: FloatArray) -> FloatArray:
     """Engineering strain L / L0 - 1 [-] of every spring of ``network`` at positions x."""
     d = x[network.pairs[:, 1]] - x[network.pairs[:, 0]]
     return np.linalg.norm(d, axis=1) / network.rest - 1.0
@@ -525,7 +547,7 @@ class DonResult:
     rows: list
 
 
-def _clip_speed(state, vmax: float):
+def _clip_speed(state: ParticleState, vmax: float) -> ParticleState:
     """The state with node speeds above ``vmax`` [m/s] scaled down to it."""
     from clothfem.particle import ParticleState
 
@@ -538,7 +560,9 @@ def _clip_speed(state, vmax: float):
     return ParticleState(t=state.t, x=state.x, v=v, a=state.a)
 
 
-def _belt_path(start: FloatArray, target: FloatArray, belt_time: float) -> Callable:
+def _belt_path(
+    start: FloatArray, target: FloatArray, belt_time: float
+) -> Callable[[float], FloatArray]:
     def at(t: float) -> FloatArray:
         s = float(_smoothstep(np.asarray(t / belt_time)))
         return (1.0 - s) * start + s * target
@@ -546,7 +570,16 @@ def _belt_path(start: FloatArray, target: FloatArray, belt_time: float) -> Calla
     return at
 
 
-def _model(*, network, fabric, x_start, ellipsoids, belt, belt_target, relax: Relaxation):
+def _model(
+    *,
+    network: SpringNetwork,
+    fabric: ParticleFabric,
+    x_start: FloatArray,
+    ellipsoids: Sequence[Ellipsoid],
+    belt: NDArray[np.intp],
+    belt_target: FloatArray,
+    relax: Relaxation,
+) -> ParticleModel:
     from clothfem import particle as pm
     from clothfem.contact.film import FilmParameters
 
@@ -570,10 +603,10 @@ def _model(*, network, fabric, x_start, ellipsoids, belt, belt_target, relax: Re
 
 def don(
     *,
-    network,
-    fabric,
+    network: SpringNetwork,
+    fabric: ParticleFabric,
     x_start: FloatArray,
-    ellipsoids: Sequence,
+    ellipsoids: Sequence[Ellipsoid],
     belt: NDArray[np.intp] | Sequence[int] = (),
     belt_target: FloatArray | None = None,
     relax: Relaxation = Relaxation(),
@@ -638,7 +671,7 @@ class PantsDonning:
     start-size bodies [m], the spring strains [-] at the end and the belt nodes."""
 
     pattern: PantsPattern
-    network: object
+    network: SpringNetwork
     x_start: FloatArray
     result: DonResult
     gap: FloatArray
@@ -651,8 +684,14 @@ class PantsDonning:
 
 
 def simple_fabric(
-    *, network, E: float, G: float, rho: float, thickness: float, fold_angle: float = 0.5 * math.pi
-):
+    *,
+    network: SpringNetwork,
+    E: float,
+    G: float,
+    rho: float,
+    thickness: float,
+    fold_angle: float = 0.5 * math.pi,
+) -> ParticleFabric:
     """Provot's (1995) isotropic spring constants on any grid (the fallback where
     :func:`clothfem.particle.fabric_from_material` rejects skewed squares, as at the pants'
     crotch): per grid square of area A, each side spring gets ``E t (A / 2) / L^2`` (tributary
@@ -704,7 +743,7 @@ def simple_fabric(
     )
 
 
-def _pants_network(geometry: dict):
+def _pants_network(geometry: dict) -> SpringNetwork:
     from mpi4py import MPI
 
     from clothfem import particle as pm
@@ -713,7 +752,9 @@ def _pants_network(geometry: dict):
     return pm.network_from_mesh(pants(MPI.COMM_SELF, **geometry))
 
 
-def _start_gaps(x: FloatArray, ellipsoids: Sequence, growth: Growth) -> tuple[FloatArray, ...]:
+def _start_gaps(
+    x: FloatArray, ellipsoids: Sequence[Ellipsoid], growth: Growth
+) -> tuple[FloatArray, ...]:
     from clothfem.body import Ellipsoid
 
     geo = growing_bodies(ellipsoids=ellipsoids, growth=growth)(0.0)[0]
@@ -726,7 +767,7 @@ def _start_gaps(x: FloatArray, ellipsoids: Sequence, growth: Growth) -> tuple[Fl
 
 def don_pants(
     *,
-    body,
+    body: LowerBody,
     frame: int = 0,
     fit: PantsFit = PantsFit(),
     relax: Relaxation = Relaxation(),
