@@ -13,14 +13,19 @@ growing colliders), in four stages (user page: docs/donning.md):
 2. **Arrangement by skinning** (:func:`skin`): every node moves rigidly with its bone to the
    body's pose (linear blend skinning), blended smoothly across the crotch (pelvis to thigh)
    and the knee (thigh to shank).
-3. **Growing colliders and a belt** (:func:`don`): the ellipsoids' cross radii grow from a
-   small fraction to full size while the particle model relaxes (explicit steps with
-   damping, strain limiting and optional gravity), so nodes that start inside a full-size
-   ellipsoid are pushed out from the bone instead of being caught on the wrong side; the
-   waist ring is pulled onto the pelvis ellipsoid's section at the waist height (the belt)
-   so the pants do not slide down.
-4. **Checks** (:func:`body_gaps`, :func:`spring_strains`): the signed gap of every node to
-   the full-size body (per segment), the strain range of the springs, steps and wall time.
+3. **Growing colliders and a belt** (:func:`don`): the ellipsoids' radii (the limbs' cross
+   radii) grow from a fraction (default 30 %) to full size while the particle model relaxes
+   (explicit steps with damping, strain limiting, clipped node speeds and optional
+   gravity), so nodes that start inside a full-size ellipsoid are pushed out from its bone
+   instead of being caught on the wrong side; the waist ring is pulled onto the pelvis
+   ellipsoid's section at the waist height (the belt) so the pants do not slide down.
+4. **Checks** (:func:`summary`: :func:`body_gaps`, :func:`spring_strains`,
+   :func:`ring_windings`): the signed gap of every node to the full-size body (per
+   segment), the strain range of each spring kind, the winding numbers of the hems about
+   the shanks and of the waist about the hips, steps and wall time.
+
+Spring constants: :func:`simple_fabric` (:func:`clothfem.particle.fabric_from_material`
+rejects the skewed grid squares under the pants' crotch).
 
 Units SI (m, s, kg); body frame of :mod:`clothfem.body.lower_body` (Z up). Serial (NumPy).
 
@@ -36,8 +41,8 @@ to the full-size body [m] (< 0 inside), ``x_start`` (n, 3) the skinned positions
 same mesh in a scene), the check results of :func:`summary`, ``c3d``, ``frame``,
 ``commit``, ``fit`` and ``relax``. The log has the same scalars as ``# key = value`` lines,
 then a CSV of progress rows. Exit code 0 when every node ends outside the body (gap >=
--``--tol``) and no structural or shear spring is stretched more than ``--strain-check``,
-1 when not, 2 for invalid arguments (nothing written).
+-``--tol``), no structural or shear spring is stretched more than ``--strain-check`` and
+the windings are right, 1 when not, 2 for invalid arguments (nothing written).
 """
 
 from __future__ import annotations
