@@ -41,8 +41,9 @@ to the full-size body [m] (< 0 inside), ``x_start`` (n, 3) the skinned positions
 same mesh in a scene), the check results of :func:`summary`, ``c3d``, ``frame``,
 ``commit``, ``fit`` and ``relax``. The log has the same scalars as ``# key = value`` lines,
 then a CSV of progress rows. Exit code 0 when every node ends outside the body (gap >=
--``--tol``), no structural or shear spring is stretched more than ``--strain-check`` and
-the windings are right, 1 when not, 2 for invalid arguments (nothing written).
+-``--tol``), no structural or shear spring is stretched more than ``--strain-check``, no
+structural spring is shortened by more than that (no crushed cell) and the windings are
+right, 1 when not, 2 for invalid arguments (nothing written).
 """
 
 from __future__ import annotations
@@ -915,7 +916,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-gravity", action="store_true", help="relax without gravity")
     p.add_argument("--tol", type=float, default=1e-6, help="gap tolerance of the check [m]")
     p.add_argument(
-        "--strain-check", type=float, default=0.5, help="largest structural/shear strain [-]"
+        "--strain-check", type=float, default=0.5, help="largest |structural| / shear strain [-]"
     )
     return p
 
@@ -1010,6 +1011,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     _write(out, d, summ, meta)
     stretch = max(summ["strain_max_structural"], summ["strain_max_shear"])
+    crushed = summ["strain_min_structural"] < -args.strain_check
     inside = summ["inside_end"]
     wound = (
         all(
@@ -1026,11 +1028,13 @@ def main(argv: list[str] | None = None) -> int:
         f"{summ['strain_min_structural']:.3f} .. {summ['strain_max_structural']:.3f}, shear "
         f"{summ['strain_min_shear']:.3f} .. {summ['strain_max_shear']:.3f}; wrote {out}"
     )
+    if crushed:
+        print(f"check failed: a structural spring is shortened {summ['strain_min_structural']:.3f}")
     if stretch > args.strain_check:
         print(f"check failed: a spring is stretched {stretch:.3f} > {args.strain_check:g}")
     if not wound:
         print("check failed: a hem or the waist does not go round its own limb once")
-    return 0 if inside == 0 and stretch <= args.strain_check and wound else 1
+    return 0 if inside == 0 and stretch <= args.strain_check and not crushed and wound else 1
 
 
 if __name__ == "__main__":

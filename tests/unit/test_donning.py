@@ -254,7 +254,7 @@ def test_coarse_pants_donned_on_the_first_frame_end_outside_the_body(body, pants
     assert np.allclose(again, gap) and gap.min() >= -1e-6  # every node outside the body
     assert int(data["inside_start_full"]) > 0  # the skinned pants start partly inside ...
     assert int(data["inside_start_small"]) == 0  # ... but outside the shrunk colliders
-    assert float(data["strain_max_structural"]) < 0.5
+    assert -0.5 < float(data["strain_min_structural"]) < float(data["strain_max_structural"]) < 0.5
     # each hem goes once round its own shank and not round the other; the waist round the hips
     for s in ("L", "R"):
         for o in ("L", "R"):
