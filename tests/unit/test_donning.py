@@ -16,6 +16,7 @@ from mpi4py import MPI
 from clothfem import particle as pm
 from clothfem.body import Ellipsoid
 from clothfem.body.lower_body import lower_body_from_c3d
+from clothfem.pants_mesh import pants as pants_mesh
 from clothfem.pants_mesh import pants_lattice
 from clothfem.particle import donning as dn
 
@@ -247,6 +248,9 @@ def test_coarse_pants_donned_on_the_first_frame_end_outside_the_body(body, pants
     assert np.array_equal(data["X"], net.x0)  # the SurfaceMesh's node order ...
     geometry = {k[5:]: data[k].item() for k in data.files if k.startswith("mesh_")}
     assert np.array_equal(data["X"], pants_lattice(**geometry).x)  # ... = the gmsh tags
+    mesh = pants_mesh(MPI.COMM_SELF, **geometry).mesh  # a shell's mesh: row = input global index
+    rows = np.asarray(mesh.geometry.input_global_indices)
+    assert np.array_equal(data["X"][rows], np.asarray(mesh.geometry.x))
     x, gap = data["x"], data["gap"]
     assert x.shape == gap.shape + (3,) == net.x0.shape
     ells = [body.ellipsoids[n].ellipsoid(0) for n in body.names]
