@@ -3,17 +3,13 @@ played three times through the scene layer (validation, body motions, log): each
 the first shifted by the stride, the motion lasts three cycles, bad keys are one-line
 errors."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from _gait import WALK, right_leg
 
 from clothfem import scene as scenes
 from clothfem.body.gait_repeat import gait_cycle
 from clothfem.runners import body_motions, contact_log
-
-ROOT = Path(__file__).resolve().parents[2]
-WALK = ROOT / "data" / "mocap" / "walk_cgm_lowerlimb.c3d"
 
 
 def _scene(**extra) -> dict:
@@ -27,20 +23,11 @@ def _scene(**extra) -> dict:
         "stride_markers": ["LFEP", "RFEP"],
         **extra,
     }
-    thigh = {
-        "name": "R_thigh", "j1": "RFEP", "j2": "RFEO", "m": "RFEA",
-        "radii": [0.23, 0.066, 0.066], "centre": [0.0, 0.0, 0.7],
-        "axis": [0.0, 0.0, -1.0], "up": [0.0, 1.0, 0.0], **seg,
-    }  # fmt: skip
-    shank = {
-        "name": "R_shank", "j1": "RFEO", "j2": "RTIO", "m": "RTIA",
-        "radii": [0.24, 0.063, 0.063], "placed_by": "R_thigh", **seg,
-    }  # fmt: skip
     return {
         "scene": {"name": "walk"},
         "mesh": {"generator": "strip", "length": 0.1, "width": 0.1, "nx": 1, "ny": 1},
         "material": {"preset": "crimped-cotton", "thickness": 1e-3},
-        "body": [thigh, shank],
+        "body": right_leg(seg),
         "contact": {"torque_point": [0.0, 0.0, 0.25], "aj": "all"},
         "solver": {"integrator": "explicit", "settle_time": 0.0},
     }

@@ -2,10 +2,9 @@
 recording as the shank's J1 carried with its Eq. 27 frame, the thigh's e3 as the knee's
 flexion axis, the node sets, and the gait events on the run's clock."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from _gait import WALK, right_leg
 
 from clothfem import scene as scenes
 from clothfem.body.gait_repeat import gait_cycle
@@ -13,8 +12,6 @@ from clothfem.body.lower_body import read_gait_events
 from clothfem.runners import body_motions, contact_log, recorded_events
 from clothfem.torque_measure import TorqueMeasure, torque_measure
 
-ROOT = Path(__file__).resolve().parents[2]
-WALK = ROOT / "data" / "mocap" / "walk_cgm_lowerlimb.c3d"
 SETTLE = 0.1
 
 
@@ -25,21 +22,12 @@ def _raw_knee(*, repeat: int = 1, contact: dict | None = None) -> dict:
     seg = {"type": "mocap", "file": str(WALK), "window": [start, end], "repeat": repeat}
     if repeat > 1:
         seg["stride_markers"] = ["LFEP", "RFEP"]
-    thigh = {
-        "name": "R_thigh", "j1": "RFEP", "j2": "RFEO", "m": "RFEA",
-        "radii": [0.23, 0.066, 0.066], "centre": [0.0, 0.0, 0.7],
-        "axis": [0.0, 0.0, -1.0], "up": [0.0, 1.0, 0.0], **seg,
-    }  # fmt: skip
-    shank = {
-        "name": "R_shank", "j1": "RFEO", "j2": "RTIO", "m": "RTIA",
-        "radii": [0.24, 0.063, 0.063], "placed_by": "R_thigh", **seg,
-    }  # fmt: skip
     knee = {"torque_segment": "R_shank", "aj": "touching", "flexion_frame": "R_thigh"}
     return {
         "scene": {"name": "knee"},
         "mesh": {"generator": "strip", "length": 0.1, "width": 0.1, "nx": 1, "ny": 1},
         "material": {"preset": "crimped-cotton", "thickness": 1e-3},
-        "body": [thigh, shank],
+        "body": right_leg(seg),
         "contact": contact if contact is not None else knee,
         "solver": {"integrator": "explicit", "settle_time": SETTLE},
     }
