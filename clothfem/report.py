@@ -533,7 +533,11 @@ def _crush_lines(h: dict[str, np.ndarray]) -> list[str]:
     lines = [f"- yarn Green strain range: {np.nanmin(lo):.3g} to {np.nanmax(hi):.3g}"]
     bad = np.flatnonzero(lo < CRUSHED)
     if bad.size:
-        where = f"{h['angle_deg'][bad[0]]:.1f} deg" if "angle_deg" in h else f"row {bad[0] + 1}"
+        where = f"row {bad[0] + 1}"
+        if "time" in h:
+            where = f"t = {h['time'][bad[0]]:.3f} s"
+        if "angle_deg" in h and np.ptp(h["angle_deg"]) > 0:
+            where = f"{h['angle_deg'][bad[0]]:.1f} deg"
         lines.append(
             f"- warning: a yarn is compressed below E = {CRUSHED} (stretch < 0.77) at some "
             f"integration point from {where} on: a fold or an element membrane mode the mesh "
@@ -565,18 +569,23 @@ def report_markdown(run_dir: str | Path) -> str:
     else:
         status = f"stopped: {s.get('reason') or 'no reason given'}"
     a, tm = torque_curve(h)
+    recorded = a.size > 0 and not a.max() > a.min() and "time" in h  # no hinge angle
+    if recorded:  # a recorded motion: against time
+        a = torque_curve(h, "time")[1]
     final = num("final_angle_deg", lambda c: c[-1], "angle_deg")
     lines = [
         f"# Run report: {s.get('scene') or run_dir.resolve().name}",
         "",
         f"- folder: `{run_dir}`",
         f"- status: {status}",
-        f"- final angle: {_fmt(final, '.2f')} deg",
     ]
+    if not recorded:
+        lines.append(f"- final angle: {_fmt(final, '.2f')} deg")
     ok = np.isfinite(tm)
     if ok.any():
         k = int(np.argmax(np.where(ok, tm, -np.inf)))
-        lines.append(f"- peak torque |tau|: {tm[k]:.4g} N m at {a[k]:.2f} deg")
+        where = f"t = {a[k]:.3f} s" if recorded else f"{a[k]:.2f} deg"
+        lines.append(f"- peak torque |tau|: {tm[k]:.4g} N m at {where}")
     steps = s.get("steps")
     n_motion = int(np.count_nonzero(h["stage"] == "motion"))
     steps = steps if isinstance(steps, int) else n
@@ -603,13 +612,20 @@ def report_markdown(run_dir: str | Path) -> str:
         lines.append(f"- time shares {of}: {shares}")
     lines += _measures_lines(h, s)
     lines += _crush_lines(h)
-    flex = torque_curve(h, "torque_flex") if "torque_flex" in h else None
-    head = "| angle [deg] | torque_mag [N m] |" + (" -torque_flex [N m] |" if flex else "")
-    lines += ["", head, "|---|---|" + ("---|" if flex else "")]
-    for at in REPORT_ANGLES:
-        row = f"| {at:g} | {_fmt(torque_at(a, tm, at))} |"
-        if flex:
-            tf = torque_at(flex[0], flex[1], at)
+    flex = torque_curve(h, "torque_flex")[1] if "torque_flex" in h else None
+    if recorded:  # at the gait events (else every 0.25 s)
+        events = [(t, f"{c} {lb}") for t, c, lb in _events(run_dir) if a[0] <= t <= a[-1]]
+        ats = events or [(t, "") for t in np.arange(0.0, a[-1] + 1e-9, 0.25) if t >= a[0]]
+        head = "| time [s] | event | torque_mag [N m] |"
+    else:
+        ats, head = [(at, None) for at in REPORT_ANGLES], "| angle [deg] | torque_mag [N m] |"
+    head += " -torque_flex [N m] |" if flex is not None else ""
+    lines += ["", head, "|---" * head.count(" | ") + "|---|"]
+    for at, label in ats:
+        row = f"| {at:g} |" + ("" if label is None else f" {label} |")
+        row += f" {_fmt(torque_at(a, tm, at))} |"
+        if flex is not None:
+            tf = torque_at(a, flex, at)
             row += f" {_fmt(None if tf is None else -tf)} |"
         lines.append(row)
     return "\n".join(lines) + "\n"

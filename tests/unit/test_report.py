@@ -181,6 +181,25 @@ def test_plot_against_time_reads_the_events(tmp_path, capsys):
     assert main(["plot", str(d), "--x", "angle", "--y", "torque_flex"]) == 0
 
 
+def test_report_of_a_recorded_motion(tmp_path, capsys):
+    """No hinge (the angle column is constant): the peak is given at a time, no final angle,
+    and the table is at the gait events of events.csv (interpolated in time)."""
+    d = _run(tmp_path / "walk")
+    rows = list(csv.DictReader((d / "history.csv").open()))
+    for r in rows:
+        r["angle_deg"] = "0.0"
+    with (d / "history.csv").open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=COLUMNS)
+        w.writeheader()
+        w.writerows(rows)
+    (d / "events.csv").write_text("time_s,context,label\n2.5,Right,Foot Strike\n")
+    assert main(["report", str(d)]) == 0
+    text = capsys.readouterr().out
+    assert "- peak torque |tau|: 5 N m at t = 4.000 s" in text and "final angle" not in text
+    assert "| time [s] | event | torque_mag [N m] | -torque_flex [N m] |" in text
+    assert "| 2.5 | Right Foot Strike | 3.5 | 3.5 |" in text  # halfway between rows 2.0, 3.0
+
+
 def test_report_text(tmp_path, capsys):
     d = _run(tmp_path / "run", summary=STOPPED)
     md = tmp_path / "r.md"
