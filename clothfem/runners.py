@@ -265,8 +265,8 @@ def _torque_where(scene: dict[str, Any]) -> str:
     where = (
         f"J = {J.tolist()} m"
         if J is not None
-        else f"the moving joint J1 of {body[k]['name']} (Eq. 27 frame), torque_flex about e3 "
-        f"of {c['flexion_frame'] or body[k]['name']}"
+        else f"the moving joint J1 of {body[k]['name']} (Eq. 27 frame), torque_flex about "
+        f"+-{c['flexion_axis']} of {c['flexion_frame'] or body[k]['name']} (flexion positive)"
     )
     if c["aj"] == "all":
         return f"{where} over AJ = all"

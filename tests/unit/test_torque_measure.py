@@ -126,7 +126,7 @@ def test_gait_events_on_the_run_clock():
 
 def test_log_names_the_moving_joint():
     line = [s for s in contact_log(_knee_scene()) if s.startswith("contact:")][0]
-    assert "the moving joint J1 of R_shank" in line and "e3 of R_thigh" in line
+    assert "the moving joint J1 of R_shank" in line and "+-e3 of R_thigh" in line
     assert "AJ = touching of R_shank" in line
 
 
