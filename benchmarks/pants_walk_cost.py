@@ -10,10 +10,12 @@ step = the rest: the explicit step's force assembly, self-contact, updates), the
 wall time, and the wall time
 the scene's settling plus the recorded 2.2 s walk would take at this per-step cost (the
 measured per-step time x that run's steps: an estimate, labelled so). Rows go to
-``OUT/pants_walk_cost.csv``.
+``OUT/pants_walk_cost.csv``. ``--self-contact off`` runs the walks without fabric
+self-contact (the scene has it on).
 
-    mpirun -n 2 .venv/bin/python benchmarks/pants_walk_cost.py --mesh 8x8 16x16 32x32 \\
-        --settle 0.02 --walk 0.05 --out results/pants-cost
+    OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 mpirun -n 2 .venv/bin/python \\
+        benchmarks/pants_walk_cost.py --mesh 8x8 16x16 32x32 --settle 0.02 --walk 0.05 \\
+        [--self-contact off] --out results/pants-cost
 """
 
 import argparse
@@ -35,6 +37,7 @@ COMM = MPI.COMM_WORLD
 SCENE = Path(__file__).resolve().parents[1] / "demos" / "scenes" / "pants_walk.toml"
 FIELDS = ["mesh", "nodes", "ranks", "dt_crit_s", "dt_s", "steps", "run_s", "ms_per_step"]
 FIELDS += ["contact_share", "io_share", "step_share", "donning_s", "full_walk_estimate_s"]
+FIELDS += ["self_contact"]
 
 
 def _don(out: Path, mesh: tuple[int, int]) -> float:
@@ -51,9 +54,12 @@ def _don(out: Path, mesh: tuple[int, int]) -> float:
     return seconds
 
 
-def _walk(out: Path, donned: Path, mesh: tuple[int, int], settle: float, walk: float) -> dict:
+def _walk(
+    out: Path, donned: Path, mesh: tuple[int, int], settle: float, walk: float, selfc: bool
+) -> dict:
     """The short run; its row of the table."""
     sets = [f"initial.positions='{donned}'", f"mesh.n_around={mesh[0]}"]
+    sets += [f"contact.self_contact={'true' if selfc else 'false'}"]
     sets += [f"mesh.n_along={mesh[1]}", "output.png=false", "output.checkpoint_every=0"]
     scene = scenes.load(SCENE, sets)
     t_full = scene["solver"]["settle_time"] + 2.2
@@ -85,6 +91,9 @@ def main() -> None:
     parser.add_argument("--mesh", nargs="+", type=parse_mesh, default=[(8, 8), (16, 16)])
     parser.add_argument("--settle", type=float, default=0.02, help="time at rest [s]")
     parser.add_argument("--walk", type=float, default=0.05, help="walking time [s]")
+    parser.add_argument(
+        "--self-contact", choices=("on", "off"), default="on", help="fabric self-contact"
+    )
     parser.add_argument("--out", default="results/pants-cost")
     args = parser.parse_args()
     if not (args.walk > 0 and args.settle >= 0):
@@ -94,7 +103,12 @@ def main() -> None:
     for mesh in args.mesh:
         name = f"{mesh[0]}x{mesh[1]}"
         t_don = _don(out / f"donned-{name}", mesh)
-        row = {"mesh": name, "ranks": COMM.size, "donning_s": t_don}
+        row = {
+            "mesh": name,
+            "ranks": COMM.size,
+            "donning_s": t_don,
+            "self_contact": args.self_contact,
+        }
         row.update(
             _walk(
                 out / f"walk-{name}",
