@@ -116,6 +116,7 @@ def main() -> None:
                 mesh,
                 args.settle,
                 args.walk,
+                args.self_contact == "on",
             )
         )
         row["nodes"] = int(len(np.load(out / f"donned-{name}" / "donned.npz")["X"]))
