@@ -27,6 +27,8 @@ def main() -> None:
     parser.add_argument("donned", help="donned.npz of python -m clothfem.particle.donning")
     parser.add_argument("--out", default="donning.png")
     args = parser.parse_args()
+    if not Path(args.donned).is_file():
+        parser.error(f"{args.donned} does not exist (a donned.npz of the donning)")
     import matplotlib
 
     matplotlib.use("Agg")

@@ -10,9 +10,7 @@ import argparse
 import csv
 from pathlib import Path
 
-import numpy as np
-
-from clothfem.report import read_history
+from clothfem.report import ReportError, _phase_stats, read_history
 
 
 def _phases(run: Path) -> list[tuple[str, float, float]]:
@@ -27,14 +25,6 @@ def _phases(run: Path) -> list[tuple[str, float, float]]:
     return out
 
 
-def _stats(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """(time mean by the trapezoid rule, peak) of y over the rows t."""
-    if len(t) < 2:
-        return float("nan"), float("nan")
-    area = float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(t)))
-    return area / float(t[-1] - t[0]), float(np.max(y))
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+", type=Path)
@@ -44,16 +34,20 @@ def main() -> None:
     print("| " + " | ".join(head) + " |")
     print("|---|---|---|---|---|---|---|")
     for run in args.runs:
-        h = read_history(run / "history.csv")
+        if not (run / "events.csv").is_file():
+            parser.error(f"{run}: no events.csv (not a run of a recorded motion)")
+        try:
+            h = read_history(run / "history.csv")
+        except ReportError as exc:
+            parser.error(str(exc))
         on = h["stage"] == "motion"
         t, mag, res = h["time"][on], h["torque_mag"][on], -h["torque_flex"][on]
         phases = [("walk", float(t[0]), float(t[-1])), *_phases(run)]
         for name, a, b in phases:
             sel = (t >= a) & (t <= b)
-            m = _stats(t[sel], mag[sel])
-            r = _stats(t[sel], res[sel])
-            print(f"| {run.name} | {name} | {a:.2f}-{b:.2f} | {m[0]:.4f} | {m[1]:.4f} | "
-                  f"{r[0]:.4f} | {r[1]:.4f} |")  # fmt: skip
+            (m_peak, m_mean), (r_peak, r_mean) = (_phase_stats(t[sel], y[sel]) for y in (mag, res))
+            print(f"| {run.name} | {name} | {a:.2f}-{b:.2f} | {m_mean:.4f} | {m_peak:.4f} | "
+                  f"{r_mean:.4f} | {r_peak:.4f} |")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -447,11 +447,8 @@ def plot_runs(
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for a, t, name in runs:
         ax.plot(a, t, "o-" if x == "angle" else "-", ms=3, label=name)
-    for t_event, context, label in _events(run_dirs[0]) if x == "time" else ():
-        ax.axvline(t_event, color="0.6", lw=0.8, ls=":")
-        short = context[:1] + "".join(w[0] for w in label.split())  # Right Foot Strike: RFS
-        ax.text(t_event, 0.98, f" {short}", transform=ax.get_xaxis_transform(), va="top",
-                fontsize=7, color="0.4")  # fmt: skip
+    if x == "time":
+        mark_events(ax, _events(run_dirs[0]))
     ax.set_xlabel("flexion angle [deg]" if x == "angle" else "time [s]")
     ax.set_ylabel(
         "torque -tau . flexion axis [N m]" if y == "torque_flex" else "torque |tau| [N m]"
@@ -464,6 +461,16 @@ def plot_runs(
     fig.savefig(out, dpi=120)
     plt.close(fig)
     return out
+
+
+def mark_events(ax, events: Sequence[tuple[float, str, str]]) -> None:
+    """Dotted vertical lines on the matplotlib axes ``ax`` at the gait ``events`` (time [s],
+    context, label), labelled e.g. "RFS" (Right Foot Strike)."""
+    for t_event, context, label in events:
+        ax.axvline(t_event, color="0.6", lw=0.8, ls=":")
+        short = context[:1] + "".join(w[0] for w in label.split())
+        ax.text(t_event, 0.98, f" {short}", transform=ax.get_xaxis_transform(), va="top",
+                fontsize=7, color="0.4")  # fmt: skip
 
 
 def _events(run_dir: str | Path) -> list[tuple[float, str, str]]:

@@ -57,7 +57,7 @@ from .contact.forces import joint_torque
 from .contact.lagrange import ContactDivergence, LagrangeContact, LagrangeContactParameters
 from .history import yarn_strain_columns
 from .io import Progress, ResultWriter, animate_series, rank0_print, snapshot_png
-from .report import joint_power, joint_work
+from .report import joint_power, joint_work, mark_events
 from .scene import SceneError
 from .shell import ShellModel
 from .static import SolverDivergence
@@ -503,18 +503,8 @@ def _torque_plot(
     if any(tf):
         label = "-tau . hinge axis" if hinged else "-tau . flexion axis"
         ax.plot(x, tf, "s--", color="C1", ms=4, mfc="none", label=label)
-    for t, context, label in events if not hinged else ():
-        ax.axvline(t, color="0.6", lw=0.8, ls=":")
-        short = "".join(w[0] for w in label.split())  # "Foot Strike" -> "FS"
-        ax.text(
-            t,
-            0.98,
-            f" {context[:1]}{short}",
-            transform=ax.get_xaxis_transform(),
-            va="top",
-            fontsize=7,
-            color="0.4",
-        )
+    if not hinged:
+        mark_events(ax, events)
     ax.set_xlabel("flexion angle [deg]" if hinged else "time [s]")
     ax.set_ylabel("torque about the joint [N m]")
     ax.set_title(title)

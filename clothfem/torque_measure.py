@@ -20,7 +20,8 @@
   for a recorded segment).
 
 Times are scene times [s]: the body rests in its first pose until ``solver.settle_time``.
-No MPI here: :meth:`TorqueMeasure.local` sums over the points it is given; callers reduce.
+No MPI here: :meth:`TorqueMeasure.local` sums over the points it is given
+(:func:`clothfem.contact.forces.joint_torque`); callers reduce.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+from .contact.forces import joint_torque
 
 __all__ = ["TorqueMeasure", "torque_measure", "torque_segment_index"]
 
@@ -106,10 +109,7 @@ class TorqueMeasure:
         """``(tau (3,) [N m], tau . a(t) [N m])`` of the given points' forces on the body
         (N, 3) [N] about J(t), summed over AJ (this rank only: the caller reduces)."""
         on = self.select(t=t, x=x, body=body, fixed=fixed)
-        if on is not None:
-            x, force_on_body = x[on], force_on_body[on]
-        arm = x - self.centre_at(t)
-        tau = np.cross(arm, force_on_body).sum(axis=0) if len(arm) else np.zeros(3)
+        tau = np.asarray(joint_torque(x, force_on_body, self.centre_at(t), nodes=on), dtype=float)
         return tau, float(tau @ self.axis_at(t))
 
 
