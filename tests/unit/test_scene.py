@@ -244,3 +244,29 @@ def test_dynamic_scene_without_a_moving_body_needs_a_duration():
         scenes.validate(data)
     data["solver"]["duration"] = 0.1
     assert scenes.validate(data)["solver"]["duration"] == 0.1
+
+
+def test_pants_hip_radius_reaches_the_mesh():
+    """mesh.hip_radius of a pants scene builds the pants of pants_lattice(hip_radius=...):
+    the same node coordinates (the hip ellipse's perimeter is 2 pi hip_radius)."""
+    from clothfem.pants_mesh import pants_lattice
+    from clothfem.run import build_mesh
+
+    keys = {"generator": "pants", "n_around": 8, "n_along": 4, "hip_radius": 0.2}
+    data = {"scene": {"name": "p"}, "mesh": keys}
+    data["material"] = {"preset": "crimped-cotton", "thickness": 1e-3}
+    sm = build_mesh(scenes.validate(data), MPI.COMM_SELF)
+    lat = pants_lattice(hip_radius=0.2, n_around=8, n_along=4)
+    got = np.unique(sm.mesh.geometry.x.round(9), axis=0)
+    assert np.array_equal(got, np.unique(lat.x.round(9), axis=0))
+    a, b = lat.hip_semi_axes
+    h = ((a - b) / (a + b)) ** 2
+    perimeter = math.pi * (a + b) * (1 + 3 * h / (10 + math.sqrt(4 - 3 * h)))
+    assert perimeter == pytest.approx(2 * math.pi * 0.2, rel=1e-9)
+
+
+def test_settle_damping_is_an_explicit_key():
+    data = _with("solver.integrator", "newmark")
+    data["solver"].update(settle_damping=10.0, duration=0.1)
+    with pytest.raises(scenes.SceneError, match=r"'solver.settle_damping': is a parameter of"):
+        scenes.validate(data)
