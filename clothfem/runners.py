@@ -1148,6 +1148,31 @@ class _NoContact:
 _NO_CONTACT = _NoContact()
 
 
+def _self_contact_columns(sc, state: dict, *, frame: bool) -> dict[str, float]:
+    """The self-contact history columns of a row (none without self-contact): the
+    correction's diagnostics since the last row and, at a field frame, the independent
+    intersection count of the written surface (collective). Keeps the run's largest count
+    (``self_max``) and its crossings left after the fail-safe (``self_left``) in ``state``."""
+    if sc is None:
+        return {}
+    rec = sc.collect()
+    row = {
+        "self_pairs": rec.contacts,
+        "self_min_gap": rec.min_gap if math.isfinite(rec.min_gap) else math.nan,
+        "self_crossings": rec.crossings,
+        "self_crossings_left": rec.crossings_left,
+        "self_zone_nodes": rec.zone_nodes,
+        "t_self_contact": rec.wall,
+    }
+    state["self_left"] = state.get("self_left", 0) + rec.crossings_left
+    if frame:
+        t0 = time.perf_counter()
+        row["self_intersections"] = sc.intersections()
+        state["self_max"] = max(state.get("self_max", 0), row["self_intersections"])
+        row["t_self_contact"] += time.perf_counter() - t0
+    return row
+
+
 def _run_explicit(
     scene: dict[str, Any],
     out: Path,
@@ -1211,6 +1236,9 @@ def _run_explicit(
         state.update(row=int(data["run_row"]), snap=int(data["run_snap"]))
         state["pen"] = float(data["run_pen"])
         state["work"] = float(data["run_work"]) if "run_work" in data else 0.0
+        for k in ("self_max", "self_left"):
+            if f"run_{k}" in data:
+                state[k] = int(data[f"run_{k}"])
         keep = state["row"]
         if "run_external_work" in data:  # the integrator's work accumulators
             start["work"] = (float(data["run_external_work"]), float(data["run_damping_work"]))
@@ -1311,6 +1339,10 @@ def _run_explicit(
             dissipation = fc.dissipation_total if fc is not None else 0.0
             run.update(run_pen=state["pen"], contact_dissipation=dissipation, dt=dt)
             run.update(run_work=state["work"])
+            if sc is not None:  # the run's self-contact totals (summary)
+                run.update(
+                    run_self_max=state.get("self_max", 0), run_self_left=state.get("self_left", 0)
+                )
             run.update({f"st_{k}": getattr(st, k) for k in StableStep.__dataclass_fields__})
             model_data = {f"model_{k}": val for k, val in model.state_arrays().items()}
             arrays = {"v": v.getArray(readonly=True).copy(), "a": a.getArray(readonly=True)}
@@ -1331,6 +1363,7 @@ def _run_explicit(
                 return
             h = fc.collect() if fc is not None else _NO_CONTACT  # the row's contact (collective)
             state["row"] += 1
+            frame = state["row"] % o["every"] == 0 or r.time >= t_end - 1e-12  # and the last
             k = acc["n"]
             sums = np.concatenate([acc["tau"], acc["res"], [acc["work"], acc["flex"]]])
             comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)  # one reduction per row
@@ -1344,9 +1377,10 @@ def _run_explicit(
             if pressure is not None:
                 pressure.x.array[:n] = fc.nodal_multipliers() / area
                 pressure.x.scatter_forward()
-            if state["row"] % o["every"] == 0 or r.time >= t_end - 1e-12:  # and the last
+            if frame:
                 writer.write_fields(r.time, fields)
             t_io = time.perf_counter() - tio
+            self_columns = _self_contact_columns(sc, state, frame=frame)
             row = {
                 "stage": "settle" if r.time <= t_settle + 1e-12 else "motion",
                 "increment": state["row"],
@@ -1370,6 +1404,7 @@ def _run_explicit(
                 "dissipation_total": fc.dissipation_total if fc is not None else 0.0,
                 "dissipation_material": model.dissipated_material(),
                 "t_contact": fc.wall - state["contact_wall"] if fc is not None else 0.0,
+                **self_columns,
                 "t_io": t_io,
                 "wall_time": now - state["t_row"],
                 "elapsed": now - t0,
@@ -1389,6 +1424,12 @@ def _run_explicit(
                 max_penetration=state["pen"],
                 newton_iterations=0,
             )
+            if sc is not None:
+                summary.update(
+                    self_intersections_max=state.get("self_max", 0),
+                    self_crossings_left=state.get("self_left", 0),
+                    self_contact_wall=sc.wall,
+                )
             frac = min(max(r.time / t_end, 0.0), 1.0) if t_end > 0 else 1.0
             progress.update(
                 frac,

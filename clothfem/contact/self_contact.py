@@ -1445,6 +1445,16 @@ class SelfContact:
         self._window = self._empty_window()
         return rec
 
+    def intersections(self) -> int:
+        """Intersecting triangle pairs of the current surface by the independent checker
+        (:func:`clothfem.contact.intersections.intersecting_pairs`; collective: computed on
+        rank 0, the count broadcast)."""
+        from .intersections import intersecting_pairs
+
+        x = self.positions()
+        count = len(intersecting_pairs(x, self.surface.triangles)) if self.comm.rank == 0 else 0
+        return int(self.comm.bcast(count, root=0))
+
     @classmethod
     def from_scene(cls, system, contact: dict, *, film=None) -> SelfContact | None:
         """From a scene's ``contact`` section: None unless ``self_contact`` is true; the

@@ -8,7 +8,9 @@ numbers themselves, the same on 1 and 2 ranks (contact path and torques).
 """
 
 import csv
+import json
 import math
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -147,3 +149,12 @@ def test_arm_sleeve_ci_scene_explicit_with_self_contact(tmp_path, capsys):
     rows = list(csv.DictReader((out / "history.csv").open()))
     assert math.isclose(float(rows[-1]["angle_deg"]), 4.0, rel_tol=1e-12)
     assert all(math.isfinite(float(r["torque_flex"])) for r in rows)
+    # the self-contact columns in every row; the independent intersection check at the field
+    # frames (every output.every rows and the last) only: the sleeve never touches itself here
+    every = tomllib.loads(SCENE.read_text())["output"]["every"]
+    checked = [i for i, r in enumerate(rows) if r["self_intersections"] != ""]
+    assert checked == [i for i in range(len(rows)) if (i + 1) % every == 0 or i == len(rows) - 1]
+    assert all(int(rows[i]["self_intersections"]) == 0 for i in checked)
+    assert all(int(r["self_crossings_left"]) == 0 and float(r["t_self_contact"]) > 0 for r in rows)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["self_intersections_max"] == 0 and summary["self_crossings_left"] == 0
