@@ -54,6 +54,8 @@ from .shell import (
 )
 from .static import LoadStepping, solve_static
 from .torque_measure import torque_segment_index
+from .torque_table import FILE as TORQUE_FILE
+from .torque_table import torque_stats
 
 __all__ = [
     "RUN_FILES",
@@ -80,6 +82,8 @@ RUN_FILES = (
     "torque_angle.png",
     "final.png",
     "animation.gif",
+    "events.csv",
+    "torques.csv",
 )
 CHECKPOINT_FILES = ("rank*-of-*.npz", "rank*-of-*.tmp")
 
@@ -543,6 +547,9 @@ def run_scene(
             summary["wall_time"] = time.perf_counter() - t0
             if comm.rank == 0 and scene["body"]:
                 summary["measures"] = _measures(scene, out)
+            if comm.rank == 0 and scene["torques"]:
+                t_from = scene["solver"]["settle_time"]
+                summary["torques"] = torque_stats(out / TORQUE_FILE, t_from=t_from)
             if _started(out, comm):  # a failed start writes nothing
                 _write_summary(out, summary, comm)
         rank0_print(f"done in {time.perf_counter() - t0:.1f} s; results in {out}/")

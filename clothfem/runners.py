@@ -62,6 +62,9 @@ from .scene import SceneError
 from .shell import ShellModel
 from .static import SolverDivergence
 from .torque_measure import TorqueMeasure, torque_measure, torque_segment_index
+from .torque_table import TorqueTable
+from .torque_table import append as append_torques
+from .torque_table import keep_rows as keep_torque_rows
 
 __all__ = ["body_motions", "contact_log", "run_contact_scene", "torque_centre"]
 
@@ -1276,6 +1279,11 @@ def _run_explicit(
     k_torque, name = plan.k_torque, scene["scene"]["name"]
     n = model.n_owned
     in_aj = measure.fixed_mask(fc.X) if fc is not None else None  # hinge AJ (reference)
+    table = None  # the [[torques]] measures (a body is required by the scene's validation)
+    if scene["torques"]:
+        table = TorqueTable(scene, motions, fc.X, aj_mask=_aj_mask, centre=torque_centre)
+        if resume:
+            keep_torque_rows(out, keep, comm)
 
     pressure = None  # Pa, nodal (lam / reference lumped area), last step
     if fc is not None:
@@ -1316,6 +1324,8 @@ def _run_explicit(
         touching = body == k_torque
         x = fc.X + model.u.x.array[: 3 * n].reshape(n, 3)
         tau, flex = measure.local(t=t, x=x, force_on_body=f, body=body, fixed=in_aj)
+        if table is not None:
+            table.add(t=t, x=x, force_on_body=f, body=body)
         power = 0.0
         if hinge_motion is not None and t > t_settle and touching.any():
             omega = hinge_motion.pose(t - t_settle).angular_velocity
@@ -1369,6 +1379,9 @@ def _run_explicit(
             comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)  # one reduction per row
             tau, res, flex = sums[:3] / k, sums[3:6] / k, float(sums[7]) / k
             state["work"] += float(sums[6])
+            if table is not None:
+                rows = table.rows(comm=comm, steps=k, increment=state["row"], time=r.time)
+                append_torques(out, rows, comm)
             angle = angle_at(r.time)
             now = time.perf_counter()
             pen_after = max(0.0, -h.min_gap_after) if math.isfinite(h.min_gap_after) else 0.0

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -651,6 +652,37 @@ SCHEMA: dict[str, Section] = {
         "contact of the fabric with the body (only built with a [[body]])",
         optional=True,
     ),
+    "torques": Section(
+        {
+            "name": Key(
+                "str",
+                "the measure's name in torques.csv and summary.json (letters, digits, _)",
+                required=True,
+            ),
+            "segment": Key(
+                "str",
+                "the segment whose joint is J (as contact.torque_segment), e.g. 'L_shank' "
+                "for the left knee",
+                required=True,
+            ),
+            "torque_point": Key("vec3", "explicit centre J [m] (overrides the joint)"),
+            "torque_with": Key("strs", "as contact.torque_with (aj = 'touching')"),
+            "aj": Key(
+                "choice",
+                "as contact.aj",
+                default="touching",
+                choices=("beyond_joint", "touching", "all"),
+            ),
+            "flexion_frame": Key("str", "as contact.flexion_frame (mocap segments)"),
+            "flexion_axis": Key(
+                "choice", "as contact.flexion_axis", default="e3", choices=("e2", "e3")
+            ),
+        },
+        "explicit runs: more Eq. 28 joint torques measured besides the one of [contact] (e.g. "
+        "the left knee and the hips), one row per measure and history row in torques.csv",
+        many=True,
+        optional=True,
+    ),
     "initial": Section(
         {
             "positions": Key(
@@ -834,6 +866,7 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
     _validate_mocap(out, base=None if base is None else Path(base))
     _validate_initial(out, base=None if base is None else Path(base))
     _validate_duration(out)
+    _validate_torques(out)
     if out["solver"]["settle_damping"] > 0 and out["solver"]["integrator"] != "explicit":
         _fail("solver.settle_damping", "is a parameter of solver.integrator = 'explicit' only")
     return out
@@ -1077,35 +1110,59 @@ def _validate_body(data: dict[str, Any], out: dict[str, Any]) -> None:
     _validate_torque(c, body)
 
 
-def _validate_torque(c: dict[str, Any], body: list[dict[str, Any]]) -> None:
-    """The Eq. 28 keys of ``[contact]``: J, AJ and the flexion frame (torque_measure)."""
+def _validate_torques(out: dict[str, Any]) -> None:
+    """The ``[[torques]]`` measures: unique names, explicit runs with a body, and the Eq. 28
+    keys checked as those of ``[contact]`` (:func:`torque_entry`)."""
+    names = [m["name"] for m in out["torques"]]
+    for i, m in enumerate(out["torques"]):
+        path = f"torques[{i}]"
+        if not re.fullmatch(r"[A-Za-z0-9_]+", m["name"]):
+            _fail(f"{path}.name", f"must be letters, digits and _, got {m['name']!r}")
+        if names.count(m["name"]) > 1:
+            _fail(f"{path}.name", f"must be unique, got {m['name']!r} twice")
+        if not out["body"]:
+            _fail(path, "needs a body: add [[body]] segments")
+        if out["solver"]["integrator"] != "explicit":
+            _fail(path, "is measured by solver.integrator = 'explicit' only")
+        _validate_torque(torque_entry(out, m)["contact"], out["body"], path=path)
+
+
+def torque_entry(scene: dict[str, Any], entry: dict[str, Any]) -> dict[str, Any]:
+    """``scene`` with the Eq. 28 keys of its ``[contact]`` replaced by those of the
+    ``[[torques]]`` ``entry`` (``segment`` is ``torque_segment``)."""
+    keys = ("torque_point", "torque_with", "aj", "flexion_frame", "flexion_axis")
+    c = {**scene["contact"], "torque_segment": entry["segment"], **{k: entry[k] for k in keys}}
+    return {**scene, "contact": c}
+
+
+def _validate_torque(c: dict[str, Any], body: list[dict[str, Any]], *, path="contact") -> None:
+    """The Eq. 28 keys of ``[contact]`` (or of a ``[[torques]]`` entry at ``path``, whose
+    ``segment`` is the torque segment): J, AJ and the flexion frame (torque_measure)."""
     moving = [seg["name"] for seg in body if seg["type"] in ("hinge", "mocap")]
     names = [seg["name"] for seg in body]
     hinges = [seg["name"] for seg in body if seg["type"] == "hinge"]
     named = c["torque_segment"]
+    seg_key = "contact.torque_segment" if path == "contact" else f"{path}.segment"
     if named is not None and named not in moving:
-        _fail(
-            "contact.torque_segment",
-            f"must name a hinge or mocap segment, one of {moving}, got {named!r}",
-        )
+        _fail(seg_key, f"must name a hinge or mocap segment, one of {moving}, got {named!r}")
     if named is None and not hinges and c["torque_point"] is None:
         _fail(
-            "contact.torque_point",
+            f"{path}.torque_point",
             "required when no body segment is a hinge and contact.torque_segment is not set",
         )
     if c["aj"] != "all" and named is None and not hinges:
-        _fail("contact.aj", f"{c['aj']!r} needs a torque segment (contact.torque_segment)")
+        _fail(f"{path}.aj", f"{c['aj']!r} needs a torque segment ({seg_key})")
     for other in c["torque_with"] or ():
         if other not in names:
-            _fail("contact.torque_with", f"must name body segments, one of {names}, got {other!r}")
+            _fail(f"{path}.torque_with", f"must name body segments, one of {names}, got {other!r}")
     if c["torque_with"] and c["aj"] != "touching":
-        _fail("contact.torque_with", f"counts with aj = 'touching' only, got aj = {c['aj']!r}")
+        _fail(f"{path}.torque_with", f"counts with aj = 'touching' only, got aj = {c['aj']!r}")
     mocap = [seg["name"] for seg in body if seg["type"] == "mocap"]
     if c["flexion_frame"] is not None and named not in mocap:
-        _fail("contact.flexion_frame", "needs a mocap contact.torque_segment")
+        _fail(f"{path}.flexion_frame", f"needs a mocap {seg_key}")
     if c["flexion_frame"] is not None and c["flexion_frame"] not in mocap:
         _fail(
-            "contact.flexion_frame",
+            f"{path}.flexion_frame",
             f"must name a mocap segment, one of {mocap}, got {c['flexion_frame']!r}",
         )
 

@@ -11,6 +11,7 @@ shell started from the donned positions, 0.1 s of walking after 0.15 s of settli
 The moving-knee measure itself is verified in tests/unit/test_torque_measure.py.
 """
 
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +63,61 @@ def test_pants_walk_small(tmp_path, donned):
     assert np.all(h["n_active"] > 0)  # on the body from the first row
     assert np.all(np.isfinite(h["torque_flex"]))
     assert np.any(h["torque_mag"][h["stage"] == "motion"] > 0.0)
+    # the scene's [[torques]]: the left knee and both hips, a row each per history row
+    t = _torques(out)
+    assert set(t) == {"left_knee", "right_hip", "left_hip"}
+    for rows in t.values():
+        assert np.array_equal(rows["time"], h["time"]) and np.all(np.isfinite(rows["torque_flex"]))
+    assert np.any(t["right_hip"]["torque_mag"][h["stage"] == "motion"] > 0.0)
+    assert set(s["torques"]) == set(t)
+
+
+def _torques(out: Path) -> dict[str, dict[str, np.ndarray]]:
+    """torques.csv as {name: {column: array}}."""
+    import csv
+
+    with (out / "torques.csv").open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    cols = ("time", "torque_x", "torque_y", "torque_z", "torque_mag", "torque_flex")
+    return {
+        name: {c: np.array([float(r[c]) for r in rows if r["name"] == name]) for c in cols}
+        for name in dict.fromkeys(r["name"] for r in rows)
+    }
+
+
+def test_pants_walk_torque_table(tmp_path, donned):
+    """[[torques]] against the history: a copy of the [contact] measure gives the history's
+    torque row for row, and two 'all'-node measures about the origin and about P differ by
+    P x R (Varignon), R the history's resultant of the contact forces on the body."""
+    base = Path(COMM.bcast(str(tmp_path) if COMM.rank == 0 else None, root=0))
+    data = tomllib.loads(SCENE.read_text())
+    P = [0.1, -0.2, 0.3]
+    data["torques"] = [
+        {"name": "copy", "segment": "R_shank", "aj": "touching", "torque_with": ["R_foot"],
+         "flexion_frame": "R_thigh"},
+        {"name": "about_o", "segment": "R_shank", "aj": "all", "torque_point": [0.0, 0.0, 0.0]},
+        {"name": "about_p", "segment": "R_shank", "aj": "all", "torque_point": P},
+    ]  # fmt: skip
+    sets = [
+        f"initial.positions={donned}",
+        "mesh.n_around=8",
+        "mesh.n_along=6",
+        "solver.duration=0.2",
+        "output.png=false",
+        "output.checkpoint_every=0",
+        "contact.self_contact=false",
+    ]
+    scene = scenes.validate(scenes.apply_overrides(data, sets), base=SCENE.parent)
+    out = run_scene(scene, base / "walk", comm=COMM)
+    COMM.barrier()
+    h, t = read_history(out / "history.csv"), _torques(out)
+    for c in ("torque_x", "torque_y", "torque_z", "torque_flex"):
+        assert np.array_equal(t["copy"][c], h[c])
+    R = np.column_stack([h[f"resultant_{k}"] for k in "xyz"])
+    tau_o, tau_p = ([t[n][f"torque_{k}"] for k in "xyz"] for n in ("about_o", "about_p"))
+    diff = np.column_stack(tau_o) - np.column_stack(tau_p)
+    scale = np.abs(np.column_stack(tau_o)).max()
+    assert scale > 0 and np.allclose(diff, np.cross(P, R), rtol=0, atol=1e-12 * scale)
 
 
 @pytest.mark.serial

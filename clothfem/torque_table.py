@@ -1,0 +1,150 @@
+"""More Eq. 28 joint torques per run: the ``[[torques]]`` measures of a scene (e.g. the left
+knee and both hips of the pants walk, besides the right knee of ``[contact]``).
+
+Each entry is a :class:`clothfem.torque_measure.TorqueMeasure` built from the scene with the
+entry's Eq. 28 keys in place of those of ``[contact]`` (:func:`clothfem.scene.torque_entry`),
+evaluated on the same contact forces in every step. Rows go to ``torques.csv`` (one per
+measure and history row: the means over the row's steps, as the history's torque), written
+on rank 0 and flushed as they come; a resumed run first drops the rows after its checkpoint.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mpi4py import MPI
+from numpy.typing import NDArray
+
+from .scene import torque_entry
+from .torque_measure import TorqueMeasure, torque_measure
+
+__all__ = ["COLUMNS", "FILE", "TorqueTable", "append", "keep_rows", "torque_stats"]
+
+FILE = "torques.csv"
+COLUMNS = (
+    "increment",
+    "time",
+    "name",
+    "torque_x",
+    "torque_y",
+    "torque_z",
+    "torque_mag",
+    "torque_flex",
+)
+
+
+@dataclass(frozen=True)
+class _Entry:
+    name: str
+    measure: TorqueMeasure
+    fixed: NDArray[np.bool_] | None  # the fixed AJ of a hinge beyond_joint (this rank's nodes)
+
+
+class TorqueTable:
+    """The ``[[torques]]`` measures of ``scene`` on this rank's nodes of reference positions
+    ``X`` (N, 3) [m]; ``aj_mask(scene, J)`` gives a hinge's reference ``beyond_joint``
+    selector and ``centre(scene)`` its fixed J (None for a recorded segment)."""
+
+    def __init__(
+        self,
+        scene: dict[str, Any],
+        motions: list,
+        X: NDArray[np.float64],
+        *,
+        aj_mask: Callable,
+        centre: Callable,
+    ) -> None:
+        self.entries: list[_Entry] = []
+        for spec in scene["torques"]:
+            s = torque_entry(scene, spec)
+            J = centre(s)
+            m = torque_measure(s, motions, reference_mask=aj_mask(s, J) if J is not None else None)
+            self.entries.append(_Entry(spec["name"], m, m.fixed_mask(X)))
+        self.sums = np.zeros((len(self.entries), 4))  # tau (3) and flex, summed over steps
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    def add(self, *, t: float, x, force_on_body, body) -> None:
+        """Add this step's torques of this rank's nodes (positions ``x`` [m], forces on the
+        body [N], touching segment per node, -1 none) to the row's sums."""
+        for k, e in enumerate(self.entries):
+            tau, flex = e.measure.local(
+                t=t, x=x, force_on_body=force_on_body, body=body, fixed=e.fixed
+            )
+            self.sums[k, :3] += tau
+            self.sums[k, 3] += flex
+
+    def rows(self, *, comm: MPI.Comm, steps: int, increment: int, time: float) -> list[dict]:
+        """The row's means over ranks and ``steps`` (collective); resets the sums."""
+        total = np.empty_like(self.sums)
+        comm.Allreduce(self.sums, total, op=MPI.SUM)
+        self.sums[:] = 0.0
+        total /= max(steps, 1)
+        return [
+            {
+                "increment": increment,
+                "time": time,
+                "name": e.name,
+                "torque_x": tau[0],
+                "torque_y": tau[1],
+                "torque_z": tau[2],
+                "torque_mag": float(np.linalg.norm(tau[:3])),
+                "torque_flex": tau[3],
+            }
+            for e, tau in zip(self.entries, total, strict=True)
+        ]
+
+
+def append(out: Path, rows: list[dict], comm: MPI.Comm) -> None:
+    """Append ``rows`` to ``out/torques.csv`` (rank 0; header first; flushed to disk)."""
+    if comm.rank != 0 or not rows:
+        return
+    path = Path(out) / FILE
+    new = not path.exists()
+    with path.open("a", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=COLUMNS)
+        if new:
+            w.writeheader()
+        w.writerows(rows)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def keep_rows(out: Path, last: int, comm: MPI.Comm) -> None:
+    """Drop the rows of ``out/torques.csv`` after history row ``last`` (a resumed run)."""
+    path = Path(out) / FILE
+    if comm.rank != 0 or not path.exists():
+        return
+    with path.open(newline="") as fh:
+        kept = [r for r in csv.DictReader(fh) if int(r["increment"]) <= last]
+    path.unlink()
+    append(out, kept, comm)
+
+
+def torque_stats(path: str | Path, *, t_from: float = 0.0) -> dict[str, dict[str, float]]:
+    """Per measure of a ``torques.csv``: mean, smallest and largest ``torque_flex`` and the
+    mean ``torque_mag`` [N m] over the rows after ``t_from`` [s] (e.g. the settling's end);
+    empty without the file."""
+    path = Path(path)
+    if not path.exists():
+        return {}
+    with path.open(newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if float(r["time"]) > t_from]
+    out: dict[str, dict[str, float]] = {}
+    for name in dict.fromkeys(r["name"] for r in rows):
+        flex = np.array([float(r["torque_flex"]) for r in rows if r["name"] == name])
+        mag = np.array([float(r["torque_mag"]) for r in rows if r["name"] == name])
+        out[name] = {
+            "mean_flex": float(flex.mean()),
+            "min_flex": float(flex.min()),
+            "max_flex": float(flex.max()),
+            "mean_mag": float(mag.mean()),
+        }
+    return out
