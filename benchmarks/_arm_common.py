@@ -15,6 +15,12 @@ for its name and output sections) a completed case of another study in the same 
 folder already ran is copied from it (:func:`find_twin`; ``case.json`` names it under
 ``same_as``) instead of being run again.
 
+A scene takes only the keys of its integrator: a case whose overrides switch
+``solver.integrator`` runs with ``--unset`` of the scene file's keys that belong to another
+integrator (:func:`scene_edits`), and the quasi-static path of a hinge scene gets its
+settling in ``solver.steps`` = 2 load steps and the hinge in 1-degree ``contact.increments``
+(the scene file's increment size when it has one) unless the overrides give them.
+
 :func:`case_result` reduces a case folder to one flat row (completed, reason, final angle,
 steps, cut-backs, max penetration, wall time, torques at given angles, peak torque, NaN/inf
 in the output); :class:`RowWriter` writes such rows to a CSV one at a time (flushed), and
@@ -44,7 +50,7 @@ import numpy as np
 
 from clothfem.report import curve_error, moving_average, read_history
 from clothfem.report import torque_curve as report_torque_curve
-from clothfem.scene import SceneError
+from clothfem.scene import SceneError, apply_overrides, foreign_keys
 from clothfem.scene import load as load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -57,6 +63,7 @@ REPORT_BANDS = ((2, 15), (15, 30), (30, 45), (45, 57))
 # deg: window of the centred moving average of the smoothed curve errors (curve_error
 # window=...); it filters the step-to-step dynamic oscillation of the torque (a few deg)
 SMOOTH_DEG = 2.0
+STATIC_SETTLE_STEPS = 2  # load steps of the quasi-static settling (solver.steps)
 
 __all__ = [
     "HINGE",
@@ -83,6 +90,7 @@ __all__ = [
     "read_history",
     "result_columns",
     "run_cases",
+    "scene_edits",
     "torque_curve",
     "torque_plot",
 ]
@@ -172,18 +180,49 @@ def mesh_sets(mesh: tuple[int, int]) -> list[str]:
     return [set_arg("mesh.n_around", mesh[0]), set_arg("mesh.n_along", mesh[1])]
 
 
-def angle_max_sets(angle_max: float | None, scene: Path = SCENE) -> list[str]:
-    """Overrides for ``--angle-max``: the hinge's angle_max and, for the quasi-static path,
-    ``contact.increments`` scaled so that an increment stays the scene's size (1 deg)."""
-    if angle_max is None:
+def angle_max_sets(angle_max: float | None) -> list[str]:
+    """Overrides for ``--angle-max``: the hinge's angle_max (the quasi-static path's
+    increments follow it, :func:`scene_edits`)."""
+    return [] if angle_max is None else [f"{HINGE}.angle_max={angle_max:g}"]
+
+
+def scene_edits(scene: Path, sets: Sequence[str]) -> tuple[list[str], list[str]]:
+    """(keys to ``--unset``, ``--set`` overrides to add) that run ``scene`` with ``sets``:
+    the keys of the scene file that do not apply to the integrator ``sets`` select (a key
+    ``sets`` give is kept: the run refuses it) and, on the static path, the settling steps
+    and hinge increments ``sets`` do not give (:func:`_static_sets`). Nothing when the file
+    or the overrides do not read (the run reports it)."""
+    try:
+        data = tomllib.loads(scene.read_text())
+        merged = apply_overrides(data, list(sets))
+    except (OSError, tomllib.TOMLDecodeError, SceneError):
+        return [], []
+    given = {s.split("=", 1)[0].strip() for s in sets}
+    unset = [k for k in foreign_keys(merged) if k not in given]
+    static = merged.get("solver", {}).get("integrator", "static") == "static"
+    return unset, _static_sets(data, merged, given) if static else []
+
+
+def _static_sets(data: dict[str, Any], merged: dict[str, Any], given: set[str]) -> list[str]:
+    """The quasi-static path of the hinge of scene file ``data`` (``merged``: with the
+    overrides, whose keys are ``given``): STATIC_SETTLE_STEPS load steps of settling, and
+    hinge increments of the file's size (1 deg if it has none) over the angle reached."""
+    k = int(HINGE.split(".")[1])
+    bodies = data.get("body", [])
+    a0 = bodies[k].get("angle_max") if len(bodies) > k else None
+    if not a0:
         return []
-    out = [f"{HINGE}.angle_max={angle_max:g}"]
-    data = tomllib.loads(scene.read_text())
-    inc = data.get("contact", {}).get("increments")
-    a0 = data["body"][int(HINGE.split(".")[1])].get("angle_max")
-    if inc and a0:
-        out.append(f"contact.increments={max(1, math.ceil(inc * angle_max / a0 - 1e-9))}")
-    return out
+    add = (
+        []
+        if "solver.steps" in given or "steps" in data.get("solver", {})
+        else [f"solver.steps={STATIC_SETTLE_STEPS}"]
+    )
+    inc0 = data.get("contact", {}).get("increments")
+    angle = merged["body"][k].get("angle_max", a0)
+    inc = max(1, math.ceil((inc0 or a0) * angle / a0 - 1e-9))
+    if "contact.increments" not in given and inc != inc0:
+        add.append(f"contact.increments={inc}")
+    return add
 
 
 # ---------------------------------------------------------------------------------------------
@@ -199,7 +238,11 @@ def command(case: Case, out: Path, extra: Sequence[str] = ()) -> list[str]:
     cmd = [sys.executable, "-m", "clothfem.cli", "run", str(case.scene), "--out", str(out)]
     if case.ranks > 1:
         cmd = [*MPIRUN, "-n", str(case.ranks), sys.executable, "-m", "mpi4py", *cmd[1:]]
-    for s in [*case.sets, *extra]:
+    sets = [*case.sets, *extra]
+    unset, add = scene_edits(case.scene, sets)
+    for key in unset:
+        cmd += ["--unset", key]
+    for s in [*sets, *add]:
         cmd += ["--set", s]
     return cmd
 
@@ -230,8 +273,9 @@ _NOT_PHYSICS = ("scene", "output")
 def _physics(scene_path: Path | str, sets: Sequence[str]) -> dict[str, Any] | None:
     """The validated scene with overrides, without the sections that only name it or say
     what to write (None if it does not load)."""
+    unset, add = scene_edits(Path(scene_path), sets)
     try:
-        data = load_scene(scene_path, list(sets))
+        data = load_scene(scene_path, [*sets, *add], unset=unset)
     except (SceneError, OSError):
         return None
     return {k: v for k, v in data.items() if k not in _NOT_PHYSICS}

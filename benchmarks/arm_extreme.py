@@ -124,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     out = Path(args.out)
     mesh = args.mesh or ((8, 10) if args.quick else (16, 20))
-    settings = [*mesh_sets(mesh), *angle_max_sets(args.angle_max, args.scene)]
+    settings = [*mesh_sets(mesh), *angle_max_sets(args.angle_max)]
     study_dir = out / "extreme"
     todo = cases()
     if args.dry_run:

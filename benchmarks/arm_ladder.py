@@ -483,7 +483,7 @@ def main(argv: list[str] | None = None) -> int:
     base, ladder = (QUICK_BASE, QUICK_LADDER) if args.quick else (BASE, LADDER)
     cases, ref = rung_cases(base, ladder)
     study_dir = out / "ladder"
-    settings = angle_max_sets(args.angle_max, args.scene)
+    settings = angle_max_sets(args.angle_max)
     if args.dry_run:
         print(f"# ladder: {len(cases)} rung(s) in {study_dir}/, reference {ref}")
         run_cases(cases, study_dir, args, settings=settings)

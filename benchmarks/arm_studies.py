@@ -370,7 +370,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     out = Path(args.out)
     mesh = args.mesh or ((8, 10) if args.quick else (16, 20))
-    common = [f"solver.integrator={args.integrator}", *angle_max_sets(args.angle_max, args.scene)]
+    common = [f"solver.integrator={args.integrator}", *angle_max_sets(args.angle_max)]
     table: list[tuple[str, dict]] = []
     for study in args.study:
         cases = study_cases(study, args)

@@ -45,6 +45,8 @@ def material(table: dict) -> object:
         "scene": {"name": "cost"},
         "mesh": {"generator": "strip", "length": 1.0, "width": 1.0, "nx": 1, "ny": 1},
         "material": {**table, "thickness": 1e-3},
+        # the explicit integrator's scene (membrane viscosity is a key of the dynamic ones)
+        "solver": {"integrator": "explicit", "duration": 1.0},
     }
     return build_material(scenes.validate(data)["material"])
 

@@ -1,8 +1,8 @@
 """Command line: ``clothfem run|validate|schema|plot|report``.
 
-    clothfem run SCENE.toml [--out DIR] [--set key=value ...] [--resume | --overwrite]
-                 [PETSc options]
-    clothfem validate SCENE.toml [--set key=value ...]
+    clothfem run SCENE.toml [--out DIR] [--set key=value ...] [--unset key ...]
+                 [--resume | --overwrite] [PETSc options]
+    clothfem validate SCENE.toml [--set key=value ...] [--unset key ...]
     clothfem schema            # the scene reference (docs/scene.md)
     clothfem plot RUN_DIR [RUN_DIR ...] [--out PNG] [--label NAME ...] [--y torque_flex]
                   [--x time]
@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     run = sub.add_parser("run", help="run a scene")
     run.add_argument("scene")
     run.add_argument("--out", default=None, help="output folder (default results/<scene name>)")
-    run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    _scene_edits(run)
     run.add_argument(
         "-v",
         "--verbose",
@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     val = sub.add_parser("validate", help="check a scene file")
     val.add_argument("scene")
-    val.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    _scene_edits(val)
     sub.add_parser("schema", help="print the scene reference")
     plot = sub.add_parser("plot", help="torque-angle plot of one or more run folders")
     plot.add_argument("run_dirs", nargs="+", metavar="RUN_DIR")
@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
         print(scenes.schema_markdown())
         return 0
     try:
-        scene = scenes.load(args.scene, args.set)
+        scene = scenes.load(args.scene, args.set, unset=args.unset)
     except scenes.SceneError as exc:
         print(f"clothfem: {exc}", file=sys.stderr)
         return 2
@@ -107,6 +107,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"clothfem: interrupted; results kept in {out}", file=sys.stderr)
         return 130
     return 0
+
+
+def _scene_edits(parser: argparse.ArgumentParser) -> None:
+    """``--set`` and ``--unset`` (both repeatable; the removals come first)."""
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument(
+        "--unset",
+        action="append",
+        default=[],
+        metavar="KEY",
+        help="remove KEY (e.g. solver.dt) from the scene before --set and validation",
+    )
 
 
 def _post(args: argparse.Namespace) -> int:

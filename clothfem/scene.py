@@ -1,9 +1,10 @@
-"""Scene files (TOML): schema, defaults, validation and ``--set`` overrides.
+"""Scene files (TOML): schema, defaults, validation, ``--set`` overrides and ``--unset``.
 
 A scene fully describes a run: fabric mesh, material and thickness, supports and loads, the
 body and its motion, contact, the integrator and the outputs. The schema below is the single
 source of truth: :func:`validate` checks a parsed file against it (unknown keys rejected,
-one-line errors naming the key and the allowed values) and fills defaults, and
+keys of another integrator than the scene's refused, one-line errors naming the key and
+the allowed values) and fills defaults, and
 :func:`schema_markdown` renders it as the reference table of ``docs/scene.md``.
 """
 
@@ -19,7 +20,16 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SceneError", "load", "validate", "apply_overrides", "schema_markdown", "MATERIALS"]
+__all__ = [
+    "SceneError",
+    "load",
+    "validate",
+    "apply_overrides",
+    "remove_keys",
+    "foreign_keys",
+    "schema_markdown",
+    "MATERIALS",
+]
 
 
 class SceneError(ValueError):
@@ -27,8 +37,39 @@ class SceneError(ValueError):
 
 
 @dataclass(frozen=True)
+class When:
+    """A key that applies only while the key ``selector`` ("section.key") has one of
+    ``values``: setting it otherwise is an error (e.g. a Newmark time step in an explicit run).
+    """
+
+    selector: str
+    values: tuple[str, ...]
+
+    def label(self) -> str:
+        return ", ".join(self.values)
+
+    def refusal(self, path: str, actual: str) -> str:
+        """The one-line message for ``path`` set while the selector is ``actual``."""
+        noun = self.selector.rsplit(".", 1)[-1] + ("s" if len(self.values) > 1 else "")
+        allowed = ", ".join(repr(v) for v in self.values)
+        return (
+            f"scene: {path} applies to {noun} {allowed}, not {actual!r} "
+            f"(remove it or --unset {path})"
+        )
+
+
+STATIC = When("solver.integrator", ("static",))
+NEWMARK = When("solver.integrator", ("newmark",))
+EXPLICIT = When("solver.integrator", ("explicit",))
+DYNAMIC = When("solver.integrator", ("newmark", "explicit"))
+PSRI = When("element.scheme", ("psri",))
+SRI = When("element.scheme", ("sri",))
+
+
+@dataclass(frozen=True)
 class Key:
-    """One scene key: kind in {str, int, float, bool, vec3, floats, choice, marker}."""
+    """One scene key: kind in {str, int, float, bool, vec3, floats, choice, marker}; ``when``:
+    the integrator (or element scheme) it belongs to, None for every one."""
 
     kind: str
     doc: str
@@ -38,6 +79,11 @@ class Key:
     hi: float | None = None
     open_lo: bool = False
     choices: tuple[str, ...] = ()
+    when: When | None = None
+
+    def meaning(self) -> str:
+        """The doc, led by the integrators (or scheme) the key belongs to."""
+        return self.doc if self.when is None else f"{self.when.label()}: {self.doc}"
 
     def describe(self) -> str:
         if self.kind == "choice":
@@ -226,16 +272,23 @@ SCHEMA: dict[str, Section] = {
                 **POS,
             ),
             "viscosity1": Key(
-                "float", "membrane viscosity (Kelvin-Voigt) on the warp strain rate [Pa s]", lo=0.0
+                "float",
+                "membrane viscosity (Kelvin-Voigt) on the warp strain rate [Pa s]",
+                lo=0.0,
+                when=DYNAMIC,
             ),
             "viscosity2": Key(
-                "float", "membrane viscosity (Kelvin-Voigt) on the weft strain rate [Pa s]", lo=0.0
+                "float",
+                "membrane viscosity (Kelvin-Voigt) on the weft strain rate [Pa s]",
+                lo=0.0,
+                when=DYNAMIC,
             ),
             "viscosity12": Key(
                 "float",
-                "membrane viscosity (Kelvin-Voigt) on the shear strain rate [Pa s] "
-                "(newmark, explicit; no effect in a static run)",
+                "membrane viscosity (Kelvin-Voigt) on the shear strain rate [Pa s] (a static "
+                "run has no strain rate)",
                 lo=0.0,
+                when=DYNAMIC,
             ),
             "thickness": Key("float", "fabric thickness [m]", required=True, **POS),
             "warp": Key(
@@ -320,20 +373,21 @@ SCHEMA: dict[str, Section] = {
             ),
             "psri_factor": Key(
                 "float",
-                "psri: the factor c of alpha = min(1, c t^2 / h^2), h the cell diameter",
+                "the factor c of alpha = min(1, c t^2 / h^2), h the cell diameter",
                 default=1.0,
                 lo=0.0,
                 hi=1e6,
                 open_lo=True,
+                when=PSRI,
             ),
             "stabilization": Key(
                 "float",
-                "sri only: alpha x the fully integrated membrane energy blended into the "
-                "reduced one (removes the spurious mode of reduced integration, stiffens "
-                "ovalisation)",
+                "alpha x the fully integrated membrane energy blended into the reduced one "
+                "(removes the spurious mode of reduced integration, stiffens ovalisation)",
                 default=0.0,
                 lo=0.0,
                 hi=1.0,
+                when=SRI,
             ),
         },
         "the shell element (clothfem.shell.Quadrature)",
@@ -351,81 +405,92 @@ SCHEMA: dict[str, Section] = {
             ),
             "safety": Key(
                 "float",
-                "explicit: time step = safety x the stable step dt_crit of the central "
-                "difference at t = 0 (Lanczos)",
+                "time step = safety x the stable step dt_crit of the central difference at "
+                "t = 0 (Lanczos)",
                 default=0.9,
                 lo=0.0,
                 hi=1.0,
                 open_lo=True,
+                when=EXPLICIT,
             ),
             "recheck_every": Key(
                 "int",
-                "explicit: re-estimate the stable step every N steps and shrink the step to "
-                "safety x it when smaller (0: never; the step stays safety x dt_crit at t = 0)",
+                "re-estimate the stable step every N steps and shrink the step to safety x it "
+                "when smaller (0: never; the step stays safety x dt_crit at t = 0)",
                 default=0,
                 lo=0,
+                when=EXPLICIT,
             ),
-            "steps": Key("int", "static: initial number of load steps", default=10, lo=1),
-            "min_increment": Key("float", "static: smallest load increment", default=1e-4, **POS),
+            "steps": Key("int", "initial number of load steps", default=10, lo=1, when=STATIC),
+            "min_increment": Key(
+                "float", "smallest load increment", default=1e-4, **POS, when=STATIC
+            ),
             "max_increment": Key(
                 "float",
-                "static: largest load increment",
+                "largest load increment",
                 default=0.25,
                 lo=0.0,
                 hi=1.0,
                 open_lo=True,
+                when=STATIC,
             ),
             "dt": Key(
-                "float", "newmark: time step [s]", default=0.01, lo=0.0, hi=1.0, open_lo=True
+                "float", "time step [s]", default=0.01, lo=0.0, hi=1.0, open_lo=True, when=NEWMARK
             ),
             "dt_min": Key(
                 "float",
-                "newmark: smallest time step after halvings [s] (default dt/64)",
+                "smallest time step after halvings [s] (default dt/64)",
                 lo=0.0,
                 open_lo=True,
+                when=NEWMARK,
             ),
             "gamma": Key(
                 "float",
-                "newmark: gamma in [0.5, 1] (beta = (gamma + 1/2)^2 / 4); > 0.5 damps the "
-                "highest frequencies",
+                "gamma in [0.5, 1] (beta = (gamma + 1/2)^2 / 4); > 0.5 damps the highest "
+                "frequencies",
                 default=0.6,
                 lo=0.5,
                 hi=1.0,
+                when=NEWMARK,
             ),
             "rotary_scale": Key(
                 "float",
-                "newmark, explicit: factor >= 1 on the rotary inertia rho t^3/12 of the "
-                "director (mass scaling; 1 = physical)",
+                "factor >= 1 on the rotary inertia rho t^3/12 of the director (mass scaling; "
+                "1 = physical)",
                 default=1.0,
                 lo=1.0,
+                when=DYNAMIC,
             ),
             "settle_time": Key(
                 "float",
-                "newmark, explicit: time [s] with the body at rest before the motion starts "
-                "(settling)",
+                "time [s] with the body at rest before the motion starts (settling)",
                 default=0.2,
                 lo=0.0,
+                when=DYNAMIC,
             ),
             "settle_damping": Key(
                 "float",
-                "explicit: mass-proportional damping [1/s] during the settling only (dynamic "
-                "relaxation of a started state, e.g. donned pants, before the motion; the "
-                "motion itself is undamped); 0 = none",
+                "mass-proportional damping [1/s] during the settling only (dynamic relaxation "
+                "of a started state, e.g. donned pants, before the motion; the motion itself "
+                "is undamped); 0 = none",
                 default=0.0,
                 lo=0.0,
+                when=EXPLICIT,
             ),
             "ramp_time": Key(
                 "float",
-                "newmark, explicit: time [s] over which the loads (gravity) ramp up",
+                "time [s] over which the loads (gravity) ramp up",
                 default=0.1,
                 lo=0.0,
+                when=DYNAMIC,
             ),
             "duration": Key(
                 "float",
-                "newmark, explicit: simulated time [s] (default settle_time + the longest "
-                "segment motion; required without a moving segment)",
+                "simulated time [s] (default settle_time + the longest segment motion; "
+                "required without a moving segment)",
                 lo=0.0,
                 open_lo=True,
+                when=DYNAMIC,
             ),
         },
         "the solver",
@@ -554,20 +619,23 @@ SCHEMA: dict[str, Section] = {
                 "100 x min(E1, E2) x t, at most 1e6",
                 lo=0.0,
                 open_lo=True,
+                when=NEWMARK,
             ),
             "semismooth_passes": Key(
                 "int",
-                "newmark: active-set passes per step that may change the set inside Newton "
+                "active-set passes per step that may change the set inside Newton "
                 "(semismooth); later passes converge Newton on a fixed set",
                 default=5,
                 lo=0,
+                when=NEWMARK,
             ),
             "newton_stall_limit": Key(
                 "int",
-                "newmark: Newton gives up an active-set pass (the step is cut) after this many "
+                "Newton gives up an active-set pass (the step is cut) after this many "
                 "iterations in a row with a line-search step below 1/16",
                 default=12,
                 lo=1,
+                when=NEWMARK,
             ),
             "torque_segment": Key(
                 "str",
@@ -607,6 +675,7 @@ SCHEMA: dict[str, Section] = {
                 "bool",
                 "ramp the loads (gravity) in solver.steps steps with the body at rest first",
                 default=True,
+                when=STATIC,
             ),
             "stabilization": Key(
                 "float",
@@ -615,38 +684,44 @@ SCHEMA: dict[str, Section] = {
                 "stabilization_force)",
                 default=0.0,
                 lo=0.0,
+                when=STATIC,
             ),
             "kernel": Key(
                 "choice",
-                "film: the contact correction's implementation, 'compiled' (a C loop built "
+                "the film contact correction's implementation, 'compiled' (a C loop built "
                 "on first use with the system C compiler) or 'numpy' (the vectorised "
                 "reference; the same answers to round-off, slower)",
                 default="compiled",
                 choices=("compiled", "numpy"),
+                when=EXPLICIT,
             ),
             "increments": Key(
                 "int",
                 "equal recorded increments of the hinge motion (quasi-static)",
                 default=20,
                 lo=1,
+                when=STATIC,
             ),
             "self_contact": Key(
                 "bool",
-                "explicit: fabric-fabric contact (clothfem.contact.self_contact: proximity "
-                "corrections after FILM, Coulomb friction between layers, a crossing "
-                "fail-safe); false builds nothing of it",
+                "fabric-fabric contact (clothfem.contact.self_contact: proximity corrections "
+                "after FILM, Coulomb friction between layers, a crossing fail-safe); false "
+                "builds nothing of it",
                 default=False,
+                when=EXPLICIT,
             ),
             "self_mu": Key(
                 "float",
                 "Coulomb coefficient between fabric layers (default: contact.mu)",
                 lo=0.0,
+                when=EXPLICIT,
             ),
             "self_distance": Key(
                 "float",
                 "contact distance between mid-surfaces [m] (default: material.thickness)",
                 lo=0.0,
                 open_lo=True,
+                when=EXPLICIT,
             ),
         },
         "contact of the fabric with the body (only built with a [[body]])",
@@ -719,18 +794,20 @@ SCHEMA: dict[str, Section] = {
             ),
             "checkpoint_every": Key(
                 "int",
-                "newmark: write a restart checkpoint every N accepted steps (explicit: every N "
-                "history rows; 0 = never)",
+                "write a restart checkpoint every N accepted steps (explicit: every N history "
+                "rows; 0 = never)",
                 default=10,
                 lo=0,
+                when=DYNAMIC,
             ),
             "interval": Key(
                 "float",
-                "explicit: one history row per interval [s]; its torque, resultant and "
-                "multiplier sum are the means over the steps in it",
+                "one history row per interval [s]; its torque, resultant and multiplier sum "
+                "are the means over the steps in it",
                 default=0.01,
                 lo=0.0,
                 open_lo=True,
+                when=EXPLICIT,
             ),
         },
         "what is written",
@@ -825,6 +902,7 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
             ]
         else:
             out[name] = _validate_table(name, section, data[name])
+    _validate_applies(data)
     mat = out["material"]
     if mat["preset"] is not None:
         for k, v in MATERIALS[mat["preset"]].items():
@@ -859,17 +937,46 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
                 f"must be >= 2.2 leg_radius = {2.2 * leg:.4g} m (a gap for the crotch arch), "
                 f"got {spacing!r}",
             )
-    el = out["element"]
-    if el["scheme"] == "psri" and el["stabilization"] != 0.0:
-        _fail("element.stabilization", "is a parameter of element.scheme = 'sri' only")
     _validate_body(data, out)
     _validate_mocap(out, base=None if base is None else Path(base))
     _validate_initial(out, base=None if base is None else Path(base))
     _validate_duration(out)
     _validate_torques(out)
-    if out["solver"]["settle_damping"] > 0 and out["solver"]["integrator"] != "explicit":
-        _fail("solver.settle_damping", "is a parameter of solver.integrator = 'explicit' only")
     return out
+
+
+def _foreign(data: dict[str, Any]) -> list[tuple[str, When, Any]]:
+    """(path, when, the selector's value) of every key a parsed scene sets that belongs to
+    another integrator (or element scheme) than the scene's (:class:`When`)."""
+    found = []
+    for name, section in SCHEMA.items():
+        given = data.get(name)
+        for key_name in given if isinstance(given, dict) and not section.many else ():
+            when = getattr(section.keys.get(key_name), "when", None)
+            if when is None:
+                continue
+            table, selector = when.selector.split(".")
+            chosen = data.get(table)
+            default = SCHEMA[table].keys[selector].default
+            actual = chosen.get(selector, default) if isinstance(chosen, dict) else default
+            if actual not in when.values:
+                found.append((f"{name}.{key_name}", when, actual))
+    return found
+
+
+def foreign_keys(data: dict[str, Any]) -> list[str]:
+    """The keys (``section.key``) a parsed (unvalidated) scene sets that do not apply to its
+    integrator (or element scheme): those :func:`validate` refuses, e.g. to ``--unset``
+    when a scene is switched to another integrator."""
+    return [path for path, _, _ in _foreign(data)]
+
+
+def _validate_applies(data: dict[str, Any]) -> None:
+    """Refuse the first key of another integrator (or element scheme) than the scene's."""
+    found = _foreign(data)
+    if found:
+        path, when, actual = found[0]
+        raise SceneError(when.refusal(path, actual))
 
 
 def _all_or_none(mat: dict[str, Any], keys: tuple[str, ...], what: str) -> bool:
@@ -1105,8 +1212,6 @@ def _validate_body(data: dict[str, Any], out: dict[str, Any]) -> None:
             f"must be {'film' if film else 'lagrange'!r} with solver.integrator = "
             f"{out['solver']['integrator']!r}, got {c['method']!r}",
         )
-    if c["self_contact"] and not film:
-        _fail("contact.self_contact", "needs solver.integrator = 'explicit' (implicit: not yet)")
     _validate_torque(c, body)
 
 
@@ -1195,8 +1300,36 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
     return data
 
 
-def load(path: str | Path, overrides: list[str] | None = None) -> dict[str, Any]:
-    """Read, override and validate a scene file."""
+def remove_keys(data: dict[str, Any], paths: list[str]) -> dict[str, Any]:
+    """Remove the keys ``paths`` (``section.key``, or ``section.N.key`` in an array of tables,
+    e.g. ``solver.dt``, ``body.1.omega_ramp``) from a parsed (unvalidated) scene. A key the
+    scene does not set is left as it is; a key the schema does not know is an error."""
+    data = copy.deepcopy(data)
+    for path in paths:
+        parts = path.strip().split(".")
+        section = SCHEMA.get(parts[0])
+        if section is None:
+            raise SceneError(f"--unset {path}: unknown table; allowed: {', '.join(SCHEMA)}")
+        shape = f"{parts[0]}.N.key" if section.many else f"{parts[0]}.key"
+        if len(parts) != shape.count(".") + 1 or (section.many and not parts[1].isdigit()):
+            raise SceneError(f"--unset {path}: expected {shape}")
+        if parts[-1] not in section.keys:
+            raise SceneError(f"--unset {path}: unknown key; allowed: {', '.join(section.keys)}")
+        node = data.get(parts[0])
+        if section.many and node is not None:
+            if int(parts[1]) >= len(node):
+                raise SceneError(f"--unset {path}: no element {parts[1]!r}")
+            node = node[int(parts[1])]
+        if isinstance(node, dict):
+            node.pop(parts[-1], None)
+    return data
+
+
+def load(
+    path: str | Path, overrides: list[str] | None = None, *, unset: list[str] | None = None
+) -> dict[str, Any]:
+    """Read a scene file, remove the keys ``unset`` (:func:`remove_keys`), apply the
+    ``overrides`` (:func:`apply_overrides`) and validate it."""
     path = Path(path)
     if not path.is_file():
         raise SceneError(f"scene file {str(path)!r} does not exist")
@@ -1204,7 +1337,8 @@ def load(path: str | Path, overrides: list[str] | None = None) -> dict[str, Any]
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"scene file {path.name!r} is not valid TOML: {exc}") from None
-    return validate(apply_overrides(data, overrides or []), base=path.parent)
+    data = apply_overrides(remove_keys(data, unset or []), overrides or [])
+    return validate(data, base=path.parent)
 
 
 def schema_markdown() -> str:
@@ -1225,7 +1359,7 @@ def schema_markdown() -> str:
             default = (
                 "required" if key.required else ("—" if key.default is None else repr(key.default))
             )
-            lines.append(f"| `{key_name}` | {key.describe()} | {default} | {key.doc} |")
+            lines.append(f"| `{key_name}` | {key.describe()} | {default} | {key.meaning()} |")
         if section.variants:
             lines += [""] + [
                 f"- `{kind}` requires: {', '.join(f'`{k}`' for k in req) or 'nothing more'}"

@@ -7,15 +7,18 @@ is in the scene file (`demos/scenes/arm_sleeve.toml`, keys in docs/scene.md); th
 only runs it and reads the results back.
 
     .venv/bin/python demos/arm_sleeve.py --out results/arm-sleeve [--set contact.mu=0.5 ...]
+        [--unset KEY ...]
     mpirun -n 2 .venv/bin/python -m mpi4py demos/arm_sleeve.py --out results/arm-sleeve
 
 Method (docs/arm_sleeve.md): the paper's explicit method on a 24 x 30 mesh of nine-node
 shells, central difference with the lumped mass at 0.9 x the stable step and the forward-
 increment Lagrange multipliers (Eqs. 22-25) against the moving ellipsoids, with Coulomb
 friction and the paper's non-resilient contact velocities. The implicit path (Newmark with
-Lagrange multipliers and an active set) is `--set solver.integrator=newmark`. Written as the
-run goes: `history.csv` (one row per 0.01 s), `fabric.xdmf`, `snapshot_*.png`,
-`torque_angle.png`, `animation.gif`, `summary.json`, restart checkpoints. If the run stops
+Lagrange multipliers and an active set) is `--set solver.integrator=newmark`; the
+quasi-static one also removes the keys of the dynamic integrators (the command line is in
+the scene file's comment). Written as the run goes: `history.csv` (one row per 0.01 s),
+`fabric.xdmf`, `snapshot_*.png`, `torque_angle.png`, `animation.gif`, `summary.json`,
+restart checkpoints. If the run stops
 before 57 deg, the rows and pictures up to there are kept and the summary says where and why.
 A second run into the same folder replaces the first one's files (`clothfem run` asks for
 `--overwrite` instead); a folder holding other files is refused.
@@ -36,10 +39,11 @@ parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("--out", default="results/arm-sleeve")
 parser.add_argument("--scene", default=str(Path(__file__).parent / "scenes" / "arm_sleeve.toml"))
 parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+parser.add_argument("--unset", action="append", default=[], metavar="KEY", help="remove KEY first")
 args = parser.parse_args()
 
 # 1. The scene: mesh, fabric, supports, gravity, the two ellipsoids and the hinge motion.
-scene = scenes.load(args.scene, args.set)
+scene = scenes.load(args.scene, args.set, unset=args.unset)
 
 # 2. Run it (dynamic settling, then the flexion). A stop below the smallest step is a result
 #    too: the rows written so far are kept.

@@ -1,5 +1,7 @@
 """benchmarks/_arm_common.py: a study case whose physics another study already ran is copied,
-not run again (``find_twin``); the band-mean torque columns (``band_mean``).
+not run again (``find_twin``); the band-mean torque columns (``band_mean``); a case that
+switches the scene's integrator runs without the scene's keys of the other one
+(``scene_edits``).
 
 No simulation runs: synthetic case folders (case.json, summary.json, history.csv) in
 ``tmp_path`` (one per process, so this also runs under mpirun).
@@ -81,3 +83,21 @@ def test_band_mean_is_the_exact_mean_of_the_curve():
     assert C.band_mean(a, a**2, 15.0, 30.0) == pytest.approx((30**3 - 15**3) / 45.0, rel=1e-6)
     assert C.band_mean(a, 0.1 + 0.002 * a, 2.0, 15.0) == pytest.approx(0.1 + 0.002 * 8.5)
     assert np.isnan(C.band_mean(a[:3000], a[:3000], 45.0, 57.0))
+
+
+def test_integrator_switch_removes_the_scene_keys_of_the_other_integrators(tmp_path):
+    """arm_sleeve.toml (explicit) switched to the static path: its dynamic keys are unset,
+    the settling takes 2 load steps and the hinge 1-degree increments over the angle; the
+    command and the twin lookup load it. A switch to newmark needs nothing."""
+    sets = ["solver.integrator=static", "body.1.angle_max=3"]
+    unset, add = C.scene_edits(C.SCENE, sets)
+    dynamic = ["solver.rotary_scale", "solver.settle_time", "solver.ramp_time"]
+    assert unset == [*dynamic, "output.checkpoint_every"]
+    assert add == ["solver.steps=2", "contact.increments=3"]
+    s = C.load_scene(C.SCENE, [*sets, *add], unset=unset)
+    assert s["solver"]["integrator"] == "static" and s["contact"]["increments"] == 3
+    cmd = C.command(C.Case("static", sets), tmp_path)
+    assert [cmd[i + 1] for i, w in enumerate(cmd) if w == "--unset"] == unset
+    assert cmd[-4:] == ["--set", "solver.steps=2", "--set", "contact.increments=3"]
+    assert C._physics(C.SCENE, sets) is not None
+    assert C.scene_edits(C.SCENE, ["solver.integrator=newmark"]) == ([], [])
