@@ -34,24 +34,28 @@ def test_entry_replaces_the_contact_keys():
 @pytest.mark.parametrize(
     "torques, solver, message",
     [
-        ([{"name": "a b", "segment": "L_shank"}], {}, "torques[0].name: must be letters"),
+        ([{"name": "a b", "segment": "L_shank"}], {}, "'torques[0].name': must be letters"),
         (
             [{"name": "k", "segment": "L_shank"}, {"name": "k", "segment": "R_shank"}],
             {},
-            "torques[1].name: must be unique",
+            "'torques[0].name': must be unique",
         ),
-        ([{"name": "k", "segment": "knee"}], {}, "torques[0].segment: must name a hinge or mocap"),
+        (
+            [{"name": "k", "segment": "knee"}],
+            {},
+            "'torques[0].segment': must name a hinge or mocap",
+        ),
         (
             [{"name": "k", "segment": "L_shank", "torque_with": ["L_foot"], "aj": "all"}],
             {},
-            "torques[0].torque_with: counts with aj = 'touching' only",
+            "'torques[0].torque_with': counts with aj = 'touching' only",
         ),
         (
             [{"name": "k", "segment": "L_shank", "flexion_frame": "thigh"}],
             {},
-            "torques[0].flexion_frame: must name a mocap segment",
+            "'torques[0].flexion_frame': must name a mocap segment",
         ),
-        ([{"name": "k"}], {}, "torques[0].segment: required"),
+        ([{"name": "k"}], {}, "'torques[0].segment': required"),
     ],
 )
 def test_bad_torques_one_line(torques, solver, message):
@@ -66,5 +70,7 @@ def test_torques_need_the_explicit_integrator():
     data["torques"] = [{"name": "k", "segment": "L_shank"}]
     sets = ["solver.integrator=newmark"]
     unset = ["solver.settle_damping", "contact.self_contact", "output.interval"]
-    with pytest.raises(scenes.SceneError, match=r"torques\[0\]: is measured by"):
-        scenes.validate(scenes.apply_overrides(scenes.remove_keys(data, unset), sets))
+    with pytest.raises(scenes.SceneError, match=r"'torques\[0\]': is measured by"):
+        scenes.validate(
+            scenes.apply_overrides(scenes.remove_keys(data, unset), sets), base=SCENE.parent
+        )
