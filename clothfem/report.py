@@ -18,7 +18,7 @@ import numpy as np
 
 REQUIRED = ("stage", "angle_deg", "torque_mag")
 REPORT_ANGLES = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 57.0)
-TIMERS = ("t_assembly", "t_solve", "t_contact", "t_io")
+TIMERS = ("t_assembly", "t_solve", "t_contact", "t_self_contact", "t_io")
 _ATOL = 1e-6  # angle tolerance [deg] for "reached" / "covered" (57 deg may come back 56.9999..)
 
 
@@ -553,6 +553,19 @@ def _crush_lines(h: dict[str, np.ndarray]) -> list[str]:
     return lines
 
 
+def _torques_lines(s: dict) -> list[str]:
+    """The ``[[torques]]`` measures of ``summary.json`` after the settling, one table row each."""
+    table = s.get("torques") or {}
+    if not table:
+        return []
+    lines = ["", "| further torque | mean torque_flex | min | max | mean abs(tau) |"]
+    lines.append("|---|---|---|---|---|")
+    for name, v in table.items():
+        cells = [_fmt(v.get(k)) for k in ("mean_flex", "min_flex", "max_flex", "mean_mag")]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return lines + ["", "(N m, after the settling; torques.csv has the rows)"]
+
+
 def report_markdown(run_dir: str | Path) -> str:
     """A short Markdown report of a run folder (status, torques at fixed angles, cost)."""
     run_dir = Path(run_dir)
@@ -618,6 +631,7 @@ def report_markdown(run_dir: str | Path) -> str:
             of = "of the wall time"
         lines.append(f"- time shares {of}: {shares}")
     lines += _measures_lines(h, s)
+    lines += _torques_lines(s)
     lines += _crush_lines(h)
     flex = torque_curve(h, "torque_flex")[1] if "torque_flex" in h else None
     if recorded:  # at the gait events (else every 0.25 s)

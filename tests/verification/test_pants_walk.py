@@ -20,7 +20,7 @@ from mpi4py import MPI
 
 from clothfem import scene as scenes
 from clothfem.particle import donning
-from clothfem.report import read_history, read_summary
+from clothfem.report import read_history, read_summary, report_markdown
 from clothfem.run import run_scene
 
 COMM = MPI.COMM_WORLD
@@ -70,6 +70,9 @@ def test_pants_walk_small(tmp_path, donned):
         assert np.array_equal(rows["time"], h["time"]) and np.all(np.isfinite(rows["torque_flex"]))
     assert np.any(t["right_hip"]["torque_mag"][h["stage"] == "motion"] > 0.0)
     assert set(s["torques"]) == set(t)
+    if COMM.rank == 0:
+        text = report_markdown(out)
+        assert all(f"| {name} |" in text for name in t)
 
 
 def _torques(out: Path) -> dict[str, dict[str, np.ndarray]]:
