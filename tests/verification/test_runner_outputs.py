@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -213,8 +214,9 @@ def _resume_from(reference: Path, checkpoint: Path, out: Path, scene) -> None:
     included, as a run killed after its checkpoint leaves them) and ``checkpoint``."""
     if COMM.rank == 0:
         out.mkdir()
-        for name in ("history.csv", "fabric.xdmf", "fabric.h5"):
-            shutil.copy(reference / name, out / name)
+        for name in ("history.csv", "fabric.xdmf", "fabric.h5", "torques.csv"):
+            if (reference / name).exists():
+                shutil.copy(reference / name, out / name)
         shutil.copytree(checkpoint, out / "checkpoint")
     COMM.barrier()
     run_scene(scene, out, comm=COMM, resume=True)
@@ -264,6 +266,22 @@ def test_resume_bit_for_bit_from_two_checkpoints(tmp_path, sets, picks):
         for a, b in zip(f_ref, fields, strict=True):
             assert np.array_equal(a["displacement"], b["displacement"])
             assert np.array_equal(a["contact_pressure"], b["contact_pressure"])
+
+
+def test_resume_keeps_the_torque_table(tmp_path):
+    """An explicit run with [[torques]] resumed from an early checkpoint: torques.csv (whose
+    later rows the interrupted folder holds) ends as the uninterrupted run's, byte for byte,
+    one row per history row."""
+    base = _shared(tmp_path)
+    data = tomllib.loads(CI.read_text())
+    data["torques"] = [{"name": "all_about_j", "segment": "forearm", "aj": "all"}]
+    data = scenes.apply_overrides(scenes.remove_keys(data, UNSET_STATIC), EXPLICIT)
+    scene = scenes.validate(data, base=CI.parent)
+    kept = _run_keeping_checkpoints(scene, base / "reference", (5,))
+    _resume_from(base / "reference", kept[5], base / "resumed", scene)
+    if COMM.rank == 0:
+        ref, res = ((p / "torques.csv").read_text() for p in (base / "reference", base / "resumed"))
+        assert res == ref and ref.count("\n") == len(_rows(base / "reference")) + 1
 
 
 def test_field_series_in_both_readers(tmp_path):
