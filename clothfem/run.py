@@ -84,6 +84,7 @@ RUN_FILES = (
     "animation.gif",
     "events.csv",
     "torques.csv",
+    "torques.png",
 )
 CHECKPOINT_FILES = ("rank*-of-*.npz", "rank*-of-*.tmp")
 

@@ -65,6 +65,7 @@ from .torque_measure import TorqueMeasure, torque_measure, torque_segment_index
 from .torque_table import TorqueTable
 from .torque_table import append as append_torques
 from .torque_table import keep_rows as keep_torque_rows
+from .torque_table import plot as plot_torques
 
 __all__ = ["body_motions", "contact_log", "run_contact_scene", "torque_centre"]
 
@@ -1494,5 +1495,10 @@ def _run_explicit(
             if o["png"] and comm.rank == 0 and writer.csv_path.exists():
                 if scene["body"]:
                     _torque_plot(writer.csv_path, out / "torque_angle.png", name, _events(summary))
+                if table is not None:
+                    k = torque_segment_index(scene)
+                    primary = scene["body"][k]["name"] if k is not None else "[contact]"
+                    plot_torques(out, out / "torques.png", primary=primary, title=name,
+                                 events=_events(summary))  # fmt: skip
                 _animation(scene, out, lambda t: bodies_at(t)[0])
     return out

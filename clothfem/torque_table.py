@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from .scene import torque_entry
 from .torque_measure import TorqueMeasure, torque_measure
 
-__all__ = ["COLUMNS", "FILE", "TorqueTable", "append", "keep_rows", "torque_stats"]
+__all__ = ["COLUMNS", "FILE", "TorqueTable", "append", "keep_rows", "plot", "torque_stats"]
 
 FILE = "torques.csv"
 COLUMNS = (
@@ -148,3 +148,46 @@ def torque_stats(path: str | Path, *, t_from: float = 0.0) -> dict[str, dict[str
             "mean_mag": float(mag.mean()),
         }
     return out
+
+
+def plot(
+    run_dir: str | Path,
+    png: str | Path,
+    *,
+    primary: str,
+    title: str,
+    events=(),
+) -> None:
+    """``png``: -torque_flex [N m] against time of the history's measure (labelled
+    ``primary``) and of every measure of ``torques.csv`` after the settling, gait ``events``
+    (time [s], context, label) marked (rank 0; nothing without the table)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .report import mark_events, read_history
+
+    run_dir = Path(run_dir)
+    if not (run_dir / FILE).exists():
+        return
+    h = read_history(run_dir / "history.csv")
+    motion = h["stage"] == "motion"
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.plot(h["time"][motion], -h["torque_flex"][motion], lw=1.5, label=primary)
+    with (run_dir / FILE).open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    t0 = float(h["time"][motion][0]) if motion.any() else 0.0
+    for name in dict.fromkeys(r["name"] for r in rows):
+        mine = [r for r in rows if r["name"] == name and float(r["time"]) >= t0]
+        t = [float(r["time"]) for r in mine]
+        ax.plot(t, [-float(r["torque_flex"]) for r in mine], lw=1.0, label=name)
+    mark_events(ax, events)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("-torque . flexion axis [N m] (> 0: resists flexion)")
+    ax.set_title(title)
+    ax.grid(True)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)

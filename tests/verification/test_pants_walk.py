@@ -19,6 +19,7 @@ import pytest
 from mpi4py import MPI
 
 from clothfem import scene as scenes
+from clothfem import torque_table
 from clothfem.particle import donning
 from clothfem.report import read_history, read_summary, report_markdown
 from clothfem.run import run_scene
@@ -73,6 +74,8 @@ def test_pants_walk_small(tmp_path, donned):
     if COMM.rank == 0:
         text = report_markdown(out)
         assert all(f"| {name} |" in text for name in t)
+        torque_table.plot(out, out / "torques.png", primary="R_shank", title="walk")
+        assert (out / "torques.png").stat().st_size > 10_000
 
 
 def _torques(out: Path) -> dict[str, dict[str, np.ndarray]]:
