@@ -81,6 +81,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"clothfem: {exc}", file=sys.stderr)
         return 2
     if args.command == "validate":
+        problem = scenes.mesh_file_problem(scene) if scene["mesh"]["generator"] == "file" else None
+        if problem:
+            print(f"clothfem: {problem}", file=sys.stderr)
+            return 2
         print(f"{args.scene}: valid scene {scene['scene']['name']!r}")
         return 0
     from .run import RunStopped, run_scene

@@ -34,7 +34,7 @@ from .history import yarn_strain_columns
 from .io import Progress, ResultWriter, rank0_print, snapshot_png
 from .petsc_options import describe_direct_lu
 from .runners import contact_log, run_contact_scene
-from .scene import DECRIMPING_KEYS, SceneError
+from .scene import DECRIMPING_KEYS, SceneError, mesh_file_problem
 from .shell import (
     Clamp,
     DahlFriction,
@@ -180,29 +180,11 @@ def clear_output(out: str | Path, *, comm: MPI.Comm) -> None:
 
 
 def _check_mesh_file(scene: dict[str, Any], comm: MPI.Comm) -> None:
-    """A ``generator = "file"`` mesh must exist and be a gmsh file gmsh can read (checked on
-    rank 0, the decision shared)."""
-    m = scene["mesh"]
-    if m["generator"] != "file":
+    """A ``generator = "file"`` mesh must be usable (:func:`clothfem.scene.mesh_file_problem`,
+    checked on rank 0, the decision shared)."""
+    if scene["mesh"]["generator"] != "file":
         return
-    msg = None
-    if comm.rank == 0:
-        path = Path(m["file"])
-        if not path.is_file():
-            msg = f"scene key 'mesh.file': {str(path)!r} does not exist"
-        else:
-            import gmsh
-
-            gmsh.initialize()
-            gmsh.option.setNumber("General.Terminal", 0)
-            try:
-                gmsh.merge(str(path))
-                if not len(gmsh.model.mesh.getNodes()[0]):
-                    msg = f"scene key 'mesh.file': {path.name!r} holds no mesh nodes"
-            except Exception as exc:  # gmsh raises a bare Exception
-                msg = f"scene key 'mesh.file': {path.name!r} is not a mesh gmsh can read ({exc})"
-            finally:
-                gmsh.finalize()
+    msg = mesh_file_problem(scene) if comm.rank == 0 else None
     msg = comm.bcast(msg, root=0)
     if msg:
         raise SceneError(msg)

@@ -14,6 +14,7 @@ import copy
 import math
 import re
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,10 @@ __all__ = [
     "remove_keys",
     "foreign_keys",
     "schema_markdown",
+    "check_boundaries",
+    "mesh_file_problem",
+    "torque_entry",
+    "GENERATOR_BOUNDARIES",
     "MATERIALS",
 ]
 
@@ -942,6 +947,11 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
     _validate_initial(out, base=None if base is None else Path(base))
     _validate_duration(out)
     _validate_torques(out)
+    if m["generator"] != "file":
+        check_boundaries(out, GENERATOR_BOUNDARIES[m["generator"]], m["generator"])
+    sv = out["solver"]
+    if sv["integrator"] == "newmark" and sv["dt_min"] is not None and sv["dt_min"] > sv["dt"]:
+        _fail("solver.dt_min", f"must be <= solver.dt = {sv['dt']:g} s, got {sv['dt_min']!r}")
     return out
 
 
@@ -1213,6 +1223,59 @@ def _validate_body(data: dict[str, Any], out: dict[str, Any]) -> None:
             f"{out['solver']['integrator']!r}, got {c['method']!r}",
         )
     _validate_torque(c, body)
+
+
+# the boundary names of the generated meshes (clothfem.mesh, clothfem.pants_mesh)
+GENERATOR_BOUNDARIES = {
+    "strip": ("root", "tip", "sides"),
+    "cylinder": ("shoulder", "cuff"),
+    "panel": ("start", "end", "sides"),
+    "pants": ("waist", "left_hem", "right_hem"),
+}
+
+
+def check_boundaries(scene: dict[str, Any], names: Sequence[str], source: str) -> None:
+    """Every boundary a validated ``scene`` names (supports, edge loads) is one of ``names``,
+    the boundaries of the mesh ``source`` (a generator or a file name)."""
+    refs = [(f"supports[{i}].where", s["where"]) for i, s in enumerate(scene["supports"])]
+    refs += [(f"loads[{i}].where", ld["where"]) for i, ld in enumerate(scene["loads"])]
+    for path, name in refs:
+        if name is not None and name not in names:
+            _fail(
+                path,
+                f"must name a boundary of the {source} mesh, one of {list(names)}, got {name!r}",
+            )
+
+
+def mesh_file_problem(scene: dict[str, Any]) -> str | None:
+    """Why a ``generator = "file"`` mesh cannot be used (one line), else None: the file must
+    exist, be a gmsh mesh with 2-D elements and no 3-D ones (a surface), and have the
+    boundaries the scene names as physical groups of its curves (gmsh; serial)."""
+    path = Path(scene["mesh"]["file"])
+    key = "scene key 'mesh.file'"
+    if not path.is_file():
+        return f"{key}: {str(path)!r} does not exist"
+    import gmsh
+
+    gmsh.initialize()
+    gmsh.option.setNumber("General.Terminal", 0)
+    try:
+        gmsh.merge(str(path))
+        if not len(gmsh.model.mesh.getNodes()[0]):
+            return f"{key}: {path.name!r} holds no mesh nodes"
+        if not len(gmsh.model.mesh.getElements(2)[0]) or len(gmsh.model.mesh.getElements(3)[0]):
+            return f"{key}: {path.name!r} must be a surface mesh (2-D elements, none 3-D)"
+        groups = gmsh.model.getPhysicalGroups(1)
+        names = [gmsh.model.getPhysicalName(1, tag) or f"tag{tag}" for _, tag in groups]
+    except Exception as exc:  # gmsh raises a bare Exception
+        return f"{key}: {path.name!r} is not a mesh gmsh can read ({exc})"
+    finally:
+        gmsh.finalize()
+    try:
+        check_boundaries(scene, names, path.name)
+    except SceneError as exc:
+        return str(exc)
+    return None
 
 
 def _validate_torques(out: dict[str, Any]) -> None:
