@@ -5,8 +5,10 @@ and elbow-like (the tube flattened over 0.16 m about x = 0.3 until the walls are
 apart, then bent by 120 degrees about the y axis through that region, the walls pressed
 together by the predictor at 0.05 m/s). Times (median of ``--repeat``):
 
-* broad phase: the candidate list by cKDTree (``build_candidates``) and by brute force
-  (all node-centroid distances in blocks, the same pairs), at the folded configuration;
+* broad phase: the candidate list (``build_candidates``: a uniform grid with the exclusion
+  and distances in compiled loops) and by brute force (all node-centroid distances in
+  blocks, then the exact distances), at the folded configuration, and whether both give
+  the same node-triangle pairs;
 * one correction with the candidate list reused (the steady step: 5 warm-up steps from the
   configuration, then a list built at that state) and with a rebuild;
 * the life of a candidate list while the part past the elbow turns rigidly at 57 deg/s
@@ -30,6 +32,7 @@ from clothfem.contact.intersections import check_surface
 from clothfem.contact.self_contact import (
     SelfContactParameters,
     build_candidates,
+    closest_point_triangle,
     fabric_surface,
     mesh_nodes,
     near_pairs,
@@ -58,7 +61,8 @@ def elbow(X: np.ndarray, *, angle_deg: float = 120.0, half: float = 0.08) -> np.
 
 
 def brute_force_candidates(x, surf, reach):
-    """The cKDTree query of build_candidates by blocks of all node-centroid distances."""
+    """The node-triangle pairs of build_candidates by blocks of all node-centroid distances,
+    the neighbour exclusion and the exact distances: nodes and triangles, sorted."""
     tri = surf.triangles
     xt = x[tri]
     cen = xt.mean(axis=1)
@@ -70,8 +74,12 @@ def brute_force_candidates(x, surf, reach):
         rows.append(r + i)
         cols.append(c)
     node, t = np.concatenate(rows), np.concatenate(cols)
-    far = ~(near_pairs(surf, node, tri[t, 0]) | near_pairs(surf, node, tri[t, 1]))
-    return node[far], t[far]
+    far = ~np.any([near_pairs(surf, node, tri[t, k]) for k in range(3)], axis=0)
+    node, t = node[far], t[far]
+    q, _ = closest_point_triangle(x[node], *(x[tri[t, k]] for k in range(3)))
+    close = np.linalg.norm(x[node] - q, axis=1) < reach
+    order = np.lexsort((t[close], node[close]))
+    return node[close][order], t[close][order]
 
 
 def list_life(x0: np.ndarray, c, *, omega: float = np.deg2rad(57.0), limit: int = 5000) -> int:
@@ -115,7 +123,8 @@ def case(na: int, nl: int, repeat: int, edges: bool, skin: float | None) -> dict
         t_tree, c = timed(
             lambda x0=x0: build_candidates(x0, surf, distance=D, skin=skin, edges=edges), repeat
         )
-        t_bf, _ = timed(lambda x0=x0, r=reach: brute_force_candidates(x0, surf, r), repeat)
+        t_bf, bf = timed(lambda x0=x0, r=reach: brute_force_candidates(x0, surf, r), repeat)
+        same = np.array_equal(bf[0], c.pt_node) and np.array_equal(bf[1], c.pt_tri)
         for _ in range(WARMUP):  # to the steady state: the walls pressed, the list settled
             r = self_contact_step(x0, x0 + DT * v, v, m, DT, surf, params=p, candidates=c)
             x0, c = r.x, r.candidates
@@ -134,6 +143,7 @@ def case(na: int, nl: int, repeat: int, edges: bool, skin: float | None) -> dict
         chk = check_surface(r.x, surf.triangles, radius=4 * D)
         row[name] = {
             "tree_ms": 1e3 * t_tree,
+            "same": same,
             "brute_ms": 1e3 * t_bf,
             "step_ms": 1e3 * t_step,
             "rebuild_step_ms": 1e3 * t_rebuild,
@@ -155,11 +165,12 @@ def main() -> None:
     ap.add_argument("--no-edge-proximity", action="store_true", help="node-triangle pairs only")
     args = ap.parse_args()
     print(
-        "| mesh | nodes | config | listed pairs | contacts | cKDTree list ms | brute force ms "
+        "| mesh | nodes | config | listed pairs | contacts | list build ms | brute force ms "
+        "| same pairs "
         "| step ms (list kept) | step ms (rebuilt) | list life (steps) | ms per step "
         "| intersections | min distance mm |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for spec in args.meshes:
         na, nl = (int(k) for k in spec.split("x"))
         row = case(na, nl, args.repeat, not args.no_edge_proximity, args.skin)
@@ -167,7 +178,8 @@ def main() -> None:
             r = row[name]
             print(
                 f"| {row['mesh']} | {row['nodes']} | {name} | {r['listed']} | {r['contacts']} "
-                f"| {r['tree_ms']:.2f} | {r['brute_ms']:.1f} | {r['step_ms']:.2f} "
+                f"| {r['tree_ms']:.2f} | {r['brute_ms']:.1f} | {'yes' if r['same'] else 'NO'} "
+                f"| {r['step_ms']:.2f} "
                 f"| {r['rebuild_step_ms']:.2f} | {r['life']} | {r['amortised_ms']:.2f} "
                 f"| {r['intersections']} "
                 f"| {r['min_distance_mm']:.3f} |",

@@ -82,6 +82,7 @@ IntArray = NDArray[np.intp]
 Q9_RING = np.array([0, 4, 1, 6, 3, 7, 2, 5])
 Q9_CENTRE = 8
 _FACE_EPS = 1e-9  # barycentric weight above which the closest point is inside the face
+_TILE_SPLIT = 2  # tiles per reach of the list's validity bound (Tiles)
 
 
 # --------------------------------------------------------------------------- surface
@@ -258,19 +259,27 @@ class CandidateList:
         """Whether no unlisted pair can be within ``distance`` (or cross) at any of ``xs``.
 
         A pair's distance changes by at most the largest relative displacement (since the
-        build) of a node of one side and a node of the other. Nodes in the same or adjacent
-        tiles (edge ``R``) stay within ``skin`` of each other's displacement when each
-        node's displacement from its tile's mean plus the difference of the tile means do;
-        nodes farther apart were at least ``R - L`` from each other's pairs (``L`` the longest
-        edge) and stay apart while no node moved more than ``(R - L - distance) / 2``. Rigid
-        motion of a region costs nothing but the rotation across a few tiles."""
+        build) of a node of one side and a node of the other. Nodes in the same or touching
+        tiles (edge ``R = 2 L + distance + 3 skin``, ``L`` the longest edge) stay within
+        ``skin`` of each other's displacement when each node's displacement from its tile's
+        mean plus the difference of the tile means do; so do the nodes of one triangle or
+        edge (at most ``L`` apart). An unlisted pair (at least ``distance + skin`` apart)
+        whose nodes are all in touching tiles then stays at least ``distance`` apart. If
+        some of its nodes are in touching tiles and some not, it was at least ``R - 2 L``
+        apart and moves by at most ``3 skin`` relative to itself (through a node pair in
+        touching tiles: ``skin`` along each side, ``skin`` across). If none are, it was at
+        least ``R - L`` apart and stays at least ``distance`` apart while no node moved more
+        than ``(R - L - distance) / 2`` from a common point (the centre of the displacements'
+        bounding box: a rigid translation of everything costs nothing). Rigid motion of a
+        region costs nothing but the rotation across a few tiles."""
         return all(self.tiles.spread(x - self.x_build) <= self.skin for x in xs)
 
 
 class Tiles(NamedTuple):
     """Cubes of edge ``size`` [m] holding the nodes at build: ``tile`` (N,) of each node,
     ``order``/``starts`` the nodes sorted by tile, ``pairs`` (P, 2) the tiles touching each
-    other (and themselves), ``far`` [m] the largest displacement allowed to any node."""
+    other (and themselves, ``pairs[:, 0] <= pairs[:, 1]``), ``far`` [m] the largest
+    displacement allowed to any node."""
 
     size: float
     tile: IntArray
@@ -282,8 +291,17 @@ class Tiles(NamedTuple):
     def spread(self, D: FloatArray) -> float:
         """The relative-displacement bound of nodes in touching tiles for displacements
         ``D`` (N, 3) [m] (each node against its tile's mean, plus the difference of the two
-        tiles' means), inf when a node moved more than ``far``."""
-        if float(np.max(np.einsum("ij,ij->i", D, D), initial=0.0)) > self.far**2:
+        tiles' means), inf when a node's displacement is more than ``far`` from the centre
+        of their bounding box (compiled loop when numba imports)."""
+        if len(D) == 0:
+            return 0.0
+        centre = 0.5 * (D.max(axis=0) + D.min(axis=0))
+        if _numba_kernels():
+            D = np.ascontiguousarray(D, dtype=float)
+            far2 = self.far**2
+            return _numba_kernels()[9](D, centre, self.tile, self.pairs, len(self.starts), far2)
+        Dc = D - centre
+        if float(np.max(np.einsum("ij,ij->i", Dc, Dc))) > self.far**2:
             return np.inf
         Ds = D[self.order]
         counts = np.diff(np.r_[self.starts, len(D)])
@@ -296,17 +314,21 @@ class Tiles(NamedTuple):
 
 
 def _tiles(x: FloatArray, *, longest: float, distance: float, skin: float) -> Tiles:
-    """Tiles of edge ``3 longest + distance + 2 skin`` over the nodes ``x`` and their
-    touching pairs (any node may then move ``longest + skin`` before the list expires)."""
-    size = 3.0 * longest + distance + 2.0 * skin
+    """Tiles of edge ``R / 2`` (``R = 2 longest + distance + 3 skin``) over the nodes ``x``
+    and their pairs within two tiles of each other ("touching": nodes closer than ``R`` are
+    in such a pair, nodes in no such pair are more than ``R`` apart); any node may then move
+    ``(longest + 3 skin) / 2`` before the list expires (:meth:`CandidateList.valid`)."""
+    reach = 2.0 * longest + distance + 3.0 * skin
+    size = reach / _TILE_SPLIT
     key = np.floor(x / size).astype(np.int64)
-    key -= key.min(axis=0) - 1
-    base = int(key.max()) + 2
+    key -= key.min(axis=0) - _TILE_SPLIT
+    base = int(key.max()) + _TILE_SPLIT + 1
     code = (key[:, 0] * base + key[:, 1]) * base + key[:, 2]
     uniq, tile = np.unique(code, return_inverse=True)
     k3 = np.stack([uniq // (base * base), (uniq // base) % base, uniq % base], 1)
     pairs = []
-    for off in np.stack(np.meshgrid(*[[-1, 0, 1]] * 3, indexing="ij"), -1).reshape(-1, 3):
+    steps = np.arange(-_TILE_SPLIT, _TILE_SPLIT + 1)
+    for off in np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), -1).reshape(-1, 3):
         kk = k3 + off
         c = (kk[:, 0] * base + kk[:, 1]) * base + kk[:, 2]
         j = np.minimum(np.searchsorted(uniq, c), len(uniq) - 1)
@@ -315,8 +337,8 @@ def _tiles(x: FloatArray, *, longest: float, distance: float, skin: float) -> Ti
     p = np.concatenate(pairs)
     order = np.argsort(tile, kind="stable")
     starts = np.flatnonzero(np.r_[True, np.diff(tile[order]) != 0])
-    far = 0.5 * (size - longest - distance)
-    return Tiles(size, tile, order, starts, p[p[:, 0] <= p[:, 1]], far)
+    far = 0.5 * (reach - longest - distance)
+    return Tiles(size, tile.astype(np.int64), order, starts, p[p[:, 0] <= p[:, 1]], far)
 
 
 def _moved(x: FloatArray, x_ref: FloatArray) -> FloatArray:
@@ -349,33 +371,127 @@ def build_candidates(
 ) -> CandidateList:
     """Candidate pairs at positions ``x`` (N, 3): point-triangle pairs closer than
     ``distance + skin`` [m], edge pairs closer than that (``edges``: edge-edge proximity) or
-    than ``skin`` (for the crossing check only), none near. Broad phase: cKDTree queries
-    (nodes against triangle centroids, edge midpoints against each other); then exact
-    distances; the neighbour exclusion last (on the few pairs left)."""
+    than ``skin`` (for the crossing check only), none near; sorted by node and triangle, by
+    first and second edge (``ee[:, 0] < ee[:, 1]``). Broad phase: a uniform grid of the
+    bounding boxes with the neighbour exclusion and the exact distances in one compiled loop
+    (numba), else cKDTree queries (nodes against triangle centroids, edge midpoints against
+    each other), the neighbour exclusion, then exact distances."""
     tri, edge = surface.triangles, surface.edges
     reach = distance + skin
     e_reach = reach if edges else skin + 0.01 * distance  # > skin + 2 eps (eps < 0.005 d)
+    xe = x[edge]
+    length = float(np.max(np.linalg.norm(xe[:, 0] - xe[:, 1], axis=1), initial=0.0))
+    find = _grid_candidates if _numba_kernels() else _tree_candidates
+    node, t, dist, ee, ed = find(x, surface, reach, e_reach)
+    return CandidateList(
+        x.copy(), float(skin), node, t, dist, ee, ed,
+        np.column_stack([node, tri[t]]), edge[ee].reshape(-1, 4),
+        _tiles(x, longest=length, distance=distance, skin=skin),
+    )  # fmt: skip
+
+
+def _sorted_pairs(a: IntArray, b: IntArray, dist: FloatArray) -> tuple:
+    order = np.lexsort((b, a))
+    return a[order], b[order], dist[order]
+
+
+def _tree_candidates(x: FloatArray, surface: FabricSurface, reach: float, e_reach: float):
+    """:func:`build_candidates` by cKDTree queries (without numba): node, triangle and
+    distance of the point-triangle pairs, edge pairs (K, 2) and their distances."""
+    tri, edge = surface.triangles, surface.edges
     xt = x[tri]
     cen = xt.mean(axis=1)
     rad = float(np.max(np.linalg.norm(xt - cen[:, None], axis=2), initial=0.0))
     hits = cKDTree(x).sparse_distance_matrix(cKDTree(cen), reach + rad, output_type="ndarray")
     node, t = hits["i"].astype(np.intp), hits["j"].astype(np.intp)
+    far = np.flatnonzero(_far(surface, node[:, None], tri[t]))
+    node, t = node[far], t[far]
     dist = _pt_distances(x, np.column_stack([node, tri[t]]))
-    keep = np.flatnonzero(dist < reach)
-    keep = keep[_far(surface, node[keep, None], tri[t[keep]])]
+    close = dist < reach
+    node, t, dist = _sorted_pairs(node[close], t[close], dist[close])
     xe = x[edge]
     mid = xe.mean(axis=1)
     length = float(np.max(np.linalg.norm(xe[:, 0] - xe[:, 1], axis=1), initial=0.0))
     ee = cKDTree(mid).query_pairs(e_reach + length, output_type="ndarray").astype(np.intp)
-    e0, e1 = edge[ee[:, 0]], edge[ee[:, 1]]
-    ed = _ee_distances(x, np.column_stack([e0, e1]))
-    close = np.flatnonzero(ed < e_reach)
-    close = close[_far(surface, e0[close], e1[close])]
-    return CandidateList(
-        x.copy(), float(skin), node[keep], t[keep], dist[keep], ee[close], ed[close],
-        np.column_stack([node[keep], tri[t[keep]]]), edge[ee[close]].reshape(-1, 4),
-        _tiles(x, longest=length, distance=distance, skin=skin),
-    )  # fmt: skip
+    ee = ee[_far(surface, edge[ee[:, 0]], edge[ee[:, 1]])]
+    ed = _ee_distances(x, np.column_stack([edge[ee[:, 0]], edge[ee[:, 1]]]))
+    close = ed < e_reach
+    e0, e1, ed = _sorted_pairs(ee[close, 0], ee[close, 1], ed[close])
+    return node, t, dist, np.column_stack([e0, e1]), ed
+
+
+def _near_csr(surface: FabricSurface) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The near relation as compressed rows: the near nodes of ``a`` are
+    ``cols[ptr[a]:ptr[a + 1]]`` (sorted)."""
+    n, k = surface.n_nodes, surface.near_keys
+    ptr = np.searchsorted(k // n, np.arange(n + 1)).astype(np.int64)
+    return ptr, (k % n).astype(np.int64)
+
+
+def _grid_ranges(lo_a: FloatArray, lo_b: FloatArray, size: float, half: bool = False):
+    """Items ``a`` and ``b`` in cubes of edge ``size`` [m] by the low corners of their boxes
+    (``lo_a``, ``lo_b``): ``a`` sorted by cube with the cubes' starts, ``b`` sorted by cube,
+    and per cube of ``a`` the ranges (in ``b``'s order) of the 27 cubes around it (any two
+    boxes of edge at most ``size - reach`` within ``reach`` of each other are there);
+    ``half`` (``a`` is ``b``): the cube itself first, then the 13 cubes after it."""
+    origin = np.minimum(lo_a.min(axis=0), lo_b.min(axis=0))
+    ca = np.floor((lo_a - origin) / size).astype(np.int64) + 1
+    cb = np.floor((lo_b - origin) / size).astype(np.int64) + 1
+    base = int(max(ca.max(), cb.max())) + 2
+    ka, kb = ((c[:, 0] * base + c[:, 1]) * base + c[:, 2] for c in (ca, cb))
+    a_item, b_item = np.argsort(ka, kind="stable"), np.argsort(kb, kind="stable")
+    ua, a_start = np.unique(ka[a_item], return_index=True)
+    ub, b_start = np.unique(kb[b_item], return_index=True)
+    b_end = np.r_[b_start[1:], len(kb)]
+    off = np.stack(np.meshgrid(*[[-1, 0, 1]] * 3, indexing="ij"), -1).reshape(-1, 3)
+    step = (off[:, 0] * base + off[:, 1]) * base + off[:, 2]
+    if half:
+        step = np.sort(step[step >= 0])
+    want = ua[:, None] + step[None, :]
+    j = np.minimum(np.searchsorted(ub, want), len(ub) - 1)
+    hit = ub[j] == want
+    lo, hi = np.where(hit, b_start[j], 0), np.where(hit, b_end[j], 0)
+    starts = np.r_[a_start, len(ka)]
+    return a_item, starts, b_item, lo.astype(np.int64), hi.astype(np.int64)
+
+
+def _grid_candidates(x: FloatArray, surface: FabricSurface, reach: float, e_reach: float):
+    """:func:`build_candidates` on a uniform grid by the compiled loops (the same pairs and
+    distances as :func:`_tree_candidates`): boxes within ``reach`` (slightly widened against
+    round-off), not near, exact distance below ``reach``."""
+    tri, edge = surface.triangles.astype(np.int64), surface.edges.astype(np.int64)
+    scale = max(1.0, float(np.max(np.abs(x), initial=0.0)))
+    ptr, cols = _near_csr(surface)
+    kern = _numba_kernels()
+    node, t, dist = (np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0))
+    if len(tri):
+        xt = x[tri]
+        lo, hi = xt.min(axis=1), xt.max(axis=1)
+        node, t, dist = _grid_run(kern[7], x, tri, lo, hi, x, reach, scale, ptr, cols)
+    ee, ed = np.zeros((0, 2), np.intp), np.zeros(0)
+    if len(edge):
+        xe = x[edge]
+        lo, hi = xe.min(axis=1), xe.max(axis=1)
+        e0, e1, ed = _grid_run(kern[8], x, edge, lo, hi, lo, e_reach, scale, ptr, cols, True)
+        ee = np.column_stack([e0, e1])
+    return node, t, dist, ee, ed
+
+
+def _grid_run(kernel, x, items, lo, hi, lo_a, reach, scale, ptr, cols, half=False):
+    """One grid kernel (:func:`_pt_grid_kernel` or :func:`_ee_grid_kernel`) over items
+    ``a`` with boxes from ``lo_a`` and ``items`` with boxes ``lo``, ``hi``: the sorted pairs
+    and their distances."""
+    widened = reach * (1.0 + 1e-9) + 1e-12 * scale
+    size = (float(np.max(hi - lo, initial=0.0)) + widened) * (1.0 + 1e-6)
+    grid = _grid_ranges(lo_a, lo, size, half)
+    cap = 4 * len(lo_a) + 1024
+    while True:
+        a, b, d = np.empty(cap, np.int64), np.empty(cap, np.int64), np.empty(cap)
+        args = (x, items, lo, hi, *grid, widened, reach, ptr, cols)
+        m = kernel(*args, a, b, d)
+        if m <= cap:
+            return _sorted_pairs(a[:m].astype(np.intp), b[:m].astype(np.intp), d[:m])
+        cap = m
 
 
 # --------------------------------------------------------------------------- narrow phase
@@ -659,28 +775,108 @@ def _seg_st(x, i1, i2, j1, j2):  # pragma: no cover
     return s, min(max(t, 0.0), 1.0)
 
 
+def _pt_dist(x, p, a, b, cc):  # pragma: no cover
+    """Distance of node ``p`` to triangle ``(a, b, cc)`` (numba)."""
+    w0, w1, w2 = _bary(x, p, a, b, cc)
+    s = 0.0
+    for j in range(3):
+        d = x[p, j] - (w0 * x[a, j] + w1 * x[b, j] + w2 * x[cc, j])
+        s += d * d
+    return np.sqrt(s)
+
+
+def _ee_dist(x, i1, i2, j1, j2):  # pragma: no cover
+    """Distance of segments ``i1 i2`` and ``j1 j2`` (numba)."""
+    s, t = _seg_st(x, i1, i2, j1, j2)
+    q = 0.0
+    for j in range(3):
+        d = (1 - s) * x[i1, j] + s * x[i2, j]
+        d -= (1 - t) * x[j1, j] + t * x[j2, j]
+        q += d * d
+    return np.sqrt(q)
+
+
 def _pt_dist_kernel(x, idx, out):  # pragma: no cover
     """Distances of node ``idx[:, 0]`` to triangle ``idx[:, 1:]`` (numba)."""
     for c in range(idx.shape[0]):
-        p, a, b, cc = idx[c, 0], idx[c, 1], idx[c, 2], idx[c, 3]
-        w0, w1, w2 = _bary(x, p, a, b, cc)
-        s = 0.0
-        for j in range(3):
-            d = x[p, j] - (w0 * x[a, j] + w1 * x[b, j] + w2 * x[cc, j])
-            s += d * d
-        out[c] = np.sqrt(s)
+        out[c] = _pt_dist(x, idx[c, 0], idx[c, 1], idx[c, 2], idx[c, 3])
 
 
 def _ee_dist_kernel(x, idx, out):  # pragma: no cover
     """Distances of segments ``idx[:, :2]`` and ``idx[:, 2:]`` (numba)."""
     for c in range(idx.shape[0]):
-        s, t = _seg_st(x, idx[c, 0], idx[c, 1], idx[c, 2], idx[c, 3])
-        q = 0.0
-        for j in range(3):
-            d = (1 - s) * x[idx[c, 0], j] + s * x[idx[c, 1], j]
-            d -= (1 - t) * x[idx[c, 2], j] + t * x[idx[c, 3], j]
-            q += d * d
-        out[c] = np.sqrt(q)
+        out[c] = _ee_dist(x, idx[c, 0], idx[c, 1], idx[c, 2], idx[c, 3])
+
+
+def _near(ptr, cols, a, b):  # pragma: no cover
+    """Whether nodes ``a`` and ``b`` are near (row ``a`` of the compressed relation; numba)."""
+    for k in range(ptr[a], ptr[a + 1]):
+        if cols[k] == b:
+            return True
+    return False
+
+
+def _apart(lo_a, hi_a, i, lo, hi, j, r):  # pragma: no cover
+    """Whether box ``i`` of ``lo_a``, ``hi_a`` is farther than ``r`` from box ``j`` of ``lo``,
+    ``hi`` along an axis (numba)."""
+    for k in range(3):
+        if lo_a[i, k] > hi[j, k] + r or hi_a[i, k] < lo[j, k] - r:
+            return True
+    return False
+
+
+def _pt_grid_kernel(x, tri, lo, hi, a_item, a_start, b_item, nb_lo, nb_hi, r, reach, ptr, cols,
+                    out_a, out_b, out_d):  # fmt: skip  # pragma: no cover
+    """Node-triangle pairs of the grid (numba): nodes ``a_item`` by cube (``a_start``),
+    triangles ``b_item`` with the ranges ``nb_lo``/``nb_hi`` of the cubes around; boxes
+    within ``r``, not near, distance below ``reach``. Writes up to the outputs' length,
+    returns the number of pairs."""
+    m, cap = 0, out_a.shape[0]
+    for c in range(a_start.shape[0] - 1):
+        for ia in range(a_start[c], a_start[c + 1]):
+            p = a_item[ia]
+            for k in range(nb_lo.shape[1]):
+                for ib in range(nb_lo[c, k], nb_hi[c, k]):
+                    t = b_item[ib]
+                    if _apart(x, x, p, lo, hi, t, r):
+                        continue
+                    a, b, cc = tri[t, 0], tri[t, 1], tri[t, 2]
+                    if _near(ptr, cols, p, a) or _near(ptr, cols, p, b) or _near(ptr, cols, p, cc):
+                        continue
+                    d = _pt_dist(x, p, a, b, cc)
+                    if d < reach:
+                        if m < cap:
+                            out_a[m], out_b[m], out_d[m] = p, t, d
+                        m += 1
+    return m
+
+
+def _ee_grid_kernel(x, edge, lo, hi, a_item, a_start, b_item, nb_lo, nb_hi, r, reach, ptr, cols,
+                    out_a, out_b, out_d):  # fmt: skip  # pragma: no cover
+    """Edge pairs ``i < j`` of the grid (numba), as :func:`_pt_grid_kernel` with edges on
+    both sides and the half neighbourhood of :func:`_grid_ranges` (each pair of cubes once;
+    in a cube itself the later items): boxes within ``r``, no node of one near a node of the
+    other, distance below ``reach`` (the lower edge first)."""
+    m, cap = 0, out_a.shape[0]
+    for c in range(a_start.shape[0] - 1):
+        for ia in range(a_start[c], a_start[c + 1]):
+            for k in range(nb_lo.shape[1]):
+                for ib in range(ia + 1 if k == 0 else nb_lo[c, k], nb_hi[c, k]):
+                    i, j = min(a_item[ia], b_item[ib]), max(a_item[ia], b_item[ib])
+                    if _apart(lo, hi, i, lo, hi, j, r):
+                        continue
+                    i1, i2, j1, j2 = edge[i, 0], edge[i, 1], edge[j, 0], edge[j, 1]
+                    if (
+                        _near(ptr, cols, i1, j1) or _near(ptr, cols, i1, j2)
+                        or _near(ptr, cols, i2, j1) or _near(ptr, cols, i2, j2)
+                    ):  # fmt: skip
+                        continue
+                    d = _ee_dist(x, i1, i2, j1, j2)
+                    if d < reach:
+                        if m < cap:
+                            out_a[m], out_b[m], out_d[m] = i, j, d
+                        m += 1
+    return m
 
 
 def _ee_kernel(x0, x, idx, scale, coef, normal, gap):  # pragma: no cover
@@ -757,6 +953,40 @@ def _pairs_kernel(x0, x, idx, scale, face_eps, coef, normal, gap):  # pragma: no
         coef[c, 0], coef[c, 1], coef[c, 2], coef[c, 3] = 1.0, -w0, -w1, -w2
 
 
+def _spread_kernel(D, centre, tile, pairs, n_tiles, far2):  # pragma: no cover
+    """:meth:`Tiles.spread` in three passes (numba): inf when a displacement is farther than
+    ``sqrt(far2)`` from ``centre``, else the largest bound over the touching tile
+    ``pairs``."""
+    mean, count = np.zeros((n_tiles, 3)), np.zeros(n_tiles)
+    for i in range(D.shape[0]):
+        s = 0.0
+        for j in range(3):
+            s += (D[i, j] - centre[j]) ** 2
+        if s > far2:
+            return np.inf
+        count[tile[i]] += 1.0
+        for j in range(3):
+            mean[tile[i], j] += D[i, j]
+    for t in range(n_tiles):
+        for j in range(3):
+            mean[t, j] /= count[t]
+    rmax = np.zeros(n_tiles)
+    for i in range(D.shape[0]):
+        t = tile[i]
+        s = 0.0
+        for j in range(3):
+            s += (D[i, j] - mean[t, j]) ** 2
+        rmax[t] = max(rmax[t], np.sqrt(s))
+    best = 0.0
+    for k in range(pairs.shape[0]):
+        a, b = pairs[k, 0], pairs[k, 1]
+        s = 0.0
+        for j in range(3):
+            s += (mean[a, j] - mean[b, j]) ** 2
+        best = max(best, rmax[a] + np.sqrt(s) + rmax[b])
+    return best
+
+
 def _motion_kernel(D, g, split, out):  # pragma: no cover
     """:func:`_relative_motion` pair by pair (numba)."""
     for c in range(g.shape[0]):
@@ -787,13 +1017,15 @@ def _numba_kernels() -> tuple:
             return _KERNELS
         jit = njit(cache=True, error_model="numpy")
         g = globals()
-        g["_dot3"] = jit(_dot3)  # the loops below call these three
+        g["_dot3"] = jit(_dot3)  # the loops below call these
         g["_bary"], g["_seg_st"] = jit(_bary), jit(_seg_st)
+        for f in (_pt_dist, _ee_dist, _near, _apart):
+            g[f.__name__] = jit(f)
         _KERNELS = tuple(
             jit(f)
             for f in (
                 _gs_normal, _gs_friction, _pairs_kernel, _motion_kernel, _pt_dist_kernel,
-                _ee_dist_kernel, _ee_kernel,
+                _ee_dist_kernel, _ee_kernel, _pt_grid_kernel, _ee_grid_kernel, _spread_kernel,
             )
         )  # fmt: skip
     return _KERNELS
@@ -1136,7 +1368,7 @@ def _list_for(cands, x_now, x_other, surface, p: SelfContactParameters, both=Tru
     outside a rebuilt list: a node moved more than about d in the step)."""
     span = float(np.max(_moved(x_now, x_other), initial=0.0))
     # valid at x_other too: every node within span of the build, so the tile bound is at
-    # most 6 span < skin and no node is past the allowed displacement (skin + L); capped,
+    # most 6 span < skin and no node is past the allowed displacement (> 1.5 skin); capped,
     # so that one violent step cannot build a list of the whole garment
     cap = max(p.skin_length, 10.0 * p.distance)
     skin = min(max(p.skin_length, 8.0 * span), cap)
