@@ -947,6 +947,7 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
     _validate_initial(out, base=None if base is None else Path(base))
     _validate_duration(out)
     _validate_torques(out)
+    _validate_size(out)
     if m["generator"] != "file":
         check_boundaries(out, GENERATOR_BOUNDARIES[m["generator"]], m["generator"])
     sv = out["solver"]
@@ -1276,6 +1277,56 @@ def mesh_file_problem(scene: dict[str, Any]) -> str | None:
     except SceneError as exc:
         return str(exc)
     return None
+
+
+# resident memory of a run [bytes]: BASE + per node x nodes, measured (max RSS, serial) on
+# the arm-sleeve scene on 2026-12-02: explicit 226 / 368 / 640 MB at 1,312 / 5,184 / 11,616
+# nodes (~40 kB a node), newmark (MUMPS LU) 214 / 301 / 683 MB at 336 / 1,312 / 5,184 nodes
+# (~100 kB a node, growing with the LU fill: an underestimate for much larger meshes)
+MEMORY_BASE = 0.2e9
+MEMORY_PER_NODE = {"explicit": 40e3, "newmark": 100e3, "static": 100e3}
+
+
+def _node_estimate(m: dict[str, Any]) -> tuple[str, int] | None:
+    """(the key that sets the size, about how many nodes) of a generated mesh; None for a
+    file. Second-order cells: 2 n + 1 nodes along an open side, 2 n around a closed one."""
+    k = m["order"]
+    if m["generator"] == "strip":
+        return "mesh.nx", (k * m["nx"] + 1) * (k * m["ny"] + 1)
+    if m["generator"] == "file":
+        return None
+    tube = k * m["n_around"] * (k * m["n_along"] + 1)
+    if m["generator"] == "panel":
+        tube += k * m["n_along"] + 1
+    # pants: two legs and the seat, about 2.45 tubes (2,583 nodes at 16 x 16, tube 1,056)
+    return "mesh.n_around", int(2.5 * tube) if m["generator"] == "pants" else tube
+
+
+def _available_memory() -> float | None:
+    """MemAvailable of /proc/meminfo [bytes], None where there is none."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return float(line.split()[1]) * 1024.0
+    except OSError:
+        return None
+    return None
+
+
+def _validate_size(out: dict[str, Any]) -> None:
+    """Refuse a mesh whose run would need more memory than the machine has available."""
+    est, avail = _node_estimate(out["mesh"]), _available_memory()
+    if est is None or avail is None:
+        return
+    key, nodes = est
+    need = MEMORY_BASE + MEMORY_PER_NODE[out["solver"]["integrator"]] * nodes
+    if need > avail:
+        _fail(
+            key,
+            f"about {nodes:,} nodes would need ~{need / 2**30:.1f} GiB with the "
+            f"{out['solver']['integrator']} integrator, more than the {avail / 2**30:.1f} GiB "
+            "available; use fewer cells",
+        )
 
 
 def _validate_torques(out: dict[str, Any]) -> None:

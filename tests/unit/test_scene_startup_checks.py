@@ -80,3 +80,10 @@ def test_dt_min_above_dt_refused():
     unset = ["solver.steps", "contact.increments"]
     with pytest.raises(scenes.SceneError, match=r"'solver.dt_min': must be <= solver.dt = 0.01 s"):
         scenes.load(CI, sets, unset=unset)
+
+
+def test_mesh_beyond_the_memory_refused():
+    """4000 x 4000 cells (~64 million nodes, ~2.4 TB at the measured 40 kB a node)."""
+    with pytest.raises(scenes.SceneError, match=r"'mesh.n_around': about 64,00\d,\d{3} nodes"):
+        scenes.load(SLEEVE, ["mesh.n_around=4000", "mesh.n_along=4000"])
+    assert scenes.load(SLEEVE, ["mesh.n_around=64", "mesh.n_along=64"])  # 8,256 nodes: fine
