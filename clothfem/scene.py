@@ -1009,6 +1009,21 @@ def _validate_duration(out: dict[str, Any]) -> None:
             f"required with solver.integrator = {sv['integrator']!r} and no moving body "
             "segment (a number of seconds > 0)",
         )
+    if sv["integrator"] == "static" or not moving:
+        return
+    # a moving body: the loads come on and the fabric settles before the motion starts
+    if sv["ramp_time"] > sv["settle_time"]:
+        _fail(
+            "solver.ramp_time",
+            f"must be <= solver.settle_time = {sv['settle_time']:g} s (the loads are on before "
+            f"the body moves), got {sv['ramp_time']!r}",
+        )
+    if sv["duration"] is not None and sv["duration"] <= sv["settle_time"]:
+        _fail(
+            "solver.duration",
+            f"must be > solver.settle_time = {sv['settle_time']:g} s (else the body never "
+            f"moves), got {sv['duration']!r}",
+        )
 
 
 def _read_motion(path: Path):

@@ -87,3 +87,17 @@ def test_mesh_beyond_the_memory_refused():
     with pytest.raises(scenes.SceneError, match=r"'mesh.n_around': about 64,00\d,\d{3} nodes"):
         scenes.load(SLEEVE, ["mesh.n_around=4000", "mesh.n_along=4000"])
     assert scenes.load(SLEEVE, ["mesh.n_around=64", "mesh.n_along=64"])  # 8,256 nodes: fine
+
+
+@pytest.mark.parametrize(
+    ("sets", "words"),
+    [
+        (["solver.ramp_time=0.5"], "'solver.ramp_time': must be <= solver.settle_time = 0.2 s"),
+        (["solver.duration=0.1"], "'solver.duration': must be > solver.settle_time = 0.2 s"),
+    ],
+)
+def test_contradictory_times_refused(sets, words):
+    explicit = ["solver.integrator=explicit", "solver.rotary_scale=1000"]
+    with pytest.raises(scenes.SceneError) as err:
+        scenes.load(CI, [*explicit, *sets], unset=["solver.steps", "contact.increments"])
+    assert words in str(err.value)
