@@ -43,7 +43,9 @@ same mesh in a scene), the check results of :func:`summary`, ``c3d``, ``frame``,
 then a CSV of progress rows. Exit code 0 when every node ends outside the body (gap >=
 -``--tol``), no structural or shear spring is stretched more than ``--strain-check``, no
 structural spring is shortened by more than that (no crushed cell) and the windings are
-right, 1 when not, 2 for invalid arguments (nothing written).
+right and no two triangles of the fabric intersect (the independent checker), 1 when
+not, 2 for invalid arguments (nothing written). The relaxation keeps the fabric's layers
+``--self-distance`` apart (:mod:`clothfem.contact.self_contact` after every step).
 """
 
 from __future__ import annotations
@@ -451,7 +453,9 @@ class Relaxation:
     of the stable step; max_speed: node speeds are clipped to this [m/s] > 0 after every
     step (the strain limit and the contact projection turn position corrections into
     velocities: a large start strain would otherwise fling nodes off); record_every: a
-    progress row every this many steps (>= 1).
+    progress row every this many steps (>= 1); self_distance: fabric-fabric contact distance
+    [m] > 0 between mid-surfaces (the shell's thickness; :mod:`clothfem.contact.self_contact`
+    after every step, friction ``mu``), None: the fabric may pass through itself.
     """
 
     growth: Growth = field(default_factory=Growth)
@@ -468,6 +472,7 @@ class Relaxation:
     safety: float = 0.9
     max_speed: float = 1.0
     record_every: int = 50
+    self_distance: float | None = 1e-3
 
     def __post_init__(self) -> None:
         _finite("Relaxation settle_time [s]", self.settle_time, strict=False)
@@ -490,6 +495,8 @@ class Relaxation:
             raise ValueError(f"Relaxation passes must be an integer >= 1, got {self.passes!r}")
         if int(self.record_every) != self.record_every or self.record_every < 1:
             raise ValueError("Relaxation record_every must be an integer >= 1")
+        if self.self_distance is not None:
+            _finite("Relaxation self_distance [m]", self.self_distance)
 
     @property
     def t_end(self) -> float:
@@ -645,9 +652,11 @@ def don(
     state = pm.ParticleState(t=0.0, x=x_start.copy(), v=v, a=pm.accelerations(model, x_start, v))
     limited = np.isin(network.kind, [pm.STRUCTURAL, pm.SHEAR])
     rows, steps, t_end = [], 0, relax.t_end
+    layers = _Layers.build(network, relax)
     while state.t < t_end - 1e-12:
-        state, info = pm.step_explicit(model, state, min(dt, t_end - state.t))
-        state = _clip_speed(state, relax.max_speed)
+        h = min(dt, t_end - state.t)
+        new, info = pm.step_explicit(model, state, h)
+        state = _clip_speed(layers.correct(model, state, new, h), relax.max_speed)
         steps += 1
         if not np.all(np.isfinite(state.x)):
             raise FloatingPointError(f"donning blew up at t = {state.t:.6g} s")
@@ -660,6 +669,59 @@ def don(
     return DonResult(
         x=state.x, steps=steps, dt=dt, t_end=state.t, seconds=time.perf_counter() - t0, rows=rows
     )
+
+
+def q9_cells(network: SpringNetwork) -> NDArray[np.intp]:
+    """The nine-node cells of a network's ``grid`` in basix Q2 order (vertices (0,0), (1,0),
+    (0,1), (1,1), mid-edges (.5,0), (0,.5), (1,.5), (.5,1), centre), as
+    :func:`clothfem.contact.self_contact.fabric_surface` takes them."""
+    g = network.grid
+    order = [(0, 0), (2, 0), (0, 2), (2, 2), (1, 0), (0, 1), (2, 1), (1, 2), (1, 1)]
+    return np.stack([g[:, i, j] for i, j in order], axis=1).astype(np.intp)
+
+
+@dataclass(eq=False)
+class _Layers:
+    """Fabric-fabric contact of the relaxation (None parameters: off) and its candidate
+    list, carried from step to step."""
+
+    surface: object | None
+    params: object | None
+    candidates: object | None = None
+    crossings_left: int = 0
+
+    @classmethod
+    def build(cls, network: SpringNetwork, relax: Relaxation) -> _Layers:
+        if relax.self_distance is None:
+            return cls(None, None)
+        from clothfem.contact.self_contact import SelfContactParameters, fabric_surface
+
+        surface = fabric_surface(q9_cells(network), n_nodes=network.n_nodes)
+        return cls(surface, SelfContactParameters(distance=relax.self_distance, mu=relax.mu))
+
+    def correct(self, model, old, new, h: float):
+        """``new`` (a particle step of ``h`` [s] from ``old``) with its layers kept at least
+        the contact distance apart and never crossing; the accelerations at the corrected
+        positions (velocity Verlet's second half again) where it moved anything."""
+        if self.surface is None:
+            return new
+        from clothfem import particle as pm
+        from clothfem.contact.self_contact import self_contact_step
+
+        v_half = new.v - 0.5 * h * new.a
+        v_half[model.fixed] = new.v[model.fixed]
+        res = self_contact_step(
+            old.x, new.x, v_half, model.mass, h, self.surface,
+            params=self.params, fixed=model.fixed, candidates=self.candidates,
+        )  # fmt: skip
+        self.candidates = res.candidates
+        self.crossings_left += res.crossings_left
+        if np.array_equal(res.x, new.x) and np.array_equal(res.v, v_half):
+            return new
+        a = pm.accelerations(model, res.x, res.v)
+        v = res.v + 0.5 * h * a
+        v[model.fixed] = res.v[model.fixed]
+        return pm.ParticleState(t=new.t, x=res.x, v=v, a=a)
 
 
 # --------------------------------------------------------------------------------------------
@@ -886,7 +948,17 @@ def summary(d: PantsDonning, *, tol: float) -> dict:
     for kind, code in KIND_NAMES.items():
         e = d.strain[net.kind == code]
         out[f"strain_min_{kind}"], out[f"strain_max_{kind}"] = float(e.min()), float(e.max())
+    out["self_intersections"] = self_intersections(net, d.result.x)
     return out | ring_windings(d)
+
+
+def self_intersections(network: SpringNetwork, x: FloatArray) -> int:
+    """Intersecting triangle pairs of the fabric at ``x`` (n, 3) [m] by the independent
+    checker (:func:`clothfem.contact.intersections.intersecting_pairs`)."""
+    from clothfem.contact.intersections import intersecting_pairs
+    from clothfem.contact.self_contact import triangulate_q9
+
+    return len(intersecting_pairs(x, triangulate_q9(q9_cells(network))[0]))
 
 
 # --------------------------------------------------------------------------------------------
@@ -914,6 +986,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--max-stretch", type=float, default=0.1, help="strain limit [-]")
     p.add_argument("--mu", type=float, default=0.0, help="contact friction coefficient")
     p.add_argument("--no-gravity", action="store_true", help="relax without gravity")
+    p.add_argument(
+        "--self-distance",
+        type=float,
+        default=1e-3,
+        help="fabric-fabric contact distance [m] (0: the fabric may pass through itself)",
+    )
     p.add_argument("--tol", type=float, default=1e-6, help="gap tolerance of the check [m]")
     p.add_argument(
         "--strain-check", type=float, default=0.5, help="largest |structural| / shear strain [-]"
@@ -935,6 +1013,7 @@ def _options(args: argparse.Namespace) -> tuple[PantsFit, Relaxation]:
         max_stretch=args.max_stretch,
         mu=args.mu,
         gravity=(0.0, 0.0, 0.0) if args.no_gravity else (0.0, 0.0, -9.81),
+        self_distance=args.self_distance if args.self_distance != 0 else None,
     )
     return fit, relax
 
@@ -1034,7 +1113,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"check failed: a spring is stretched {stretch:.3f} > {args.strain_check:g}")
     if not wound:
         print("check failed: a hem or the waist does not go round its own limb once")
-    return 0 if inside == 0 and stretch <= args.strain_check and not crushed and wound else 1
+    crossed = summ["self_intersections"] > 0
+    if crossed:
+        print(f"check failed: {summ['self_intersections']} triangle pairs of the fabric intersect")
+    ok = inside == 0 and stretch <= args.strain_check and not crushed and wound and not crossed
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ Analytic checks of the skinning (rigid motions are exact), the growing colliders
 around a growing ellipsoid ends outside it; a tube that already fits is left unchanged),
 the spring constants on a square grid, the fitted pattern's skeleton (hip and knee land on
 the body's joint centres) and one coarse end-to-end donning on the recording's first frame
-through the command line. Serial (the driver is serial).
+through the command line, whose layers never intersect. Serial (the driver is serial).
 """
 
 from pathlib import Path
@@ -12,10 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mpi4py import MPI
+from scipy.spatial import cKDTree
 
 from clothfem import particle as pm
 from clothfem.body import Ellipsoid
 from clothfem.body.lower_body import lower_body_from_c3d
+from clothfem.contact.intersections import intersecting_pairs
+from clothfem.contact.self_contact import mesh_nodes, triangulate_q9
+from clothfem.mesh import cylinder
 from clothfem.pants_mesh import pants as pants_mesh
 from clothfem.pants_mesh import pants_lattice
 from clothfem.particle import donning as dn
@@ -44,8 +48,6 @@ def pants(body):
 
 
 def _tube(radius: float, length: float = 0.4):
-    from clothfem.mesh import cylinder
-
     surface = cylinder(MPI.COMM_SELF, radius=radius, length=length, n_around=8, n_along=6)
     net = pm.network_from_mesh(surface)
     fab = dn.simple_fabric(network=net, E=1.2e6, G=1e5, rho=436.0, thickness=1e-3)
@@ -184,6 +186,24 @@ def test_donning_a_tube_that_already_fits_leaves_it_unchanged():
     assert dn.body_gaps(x=res.x, ellipsoids=[ell])[0].min() > 0.009
 
 
+def test_q9_cells_of_a_network_are_the_mesh_cells_oriented_alike():
+    """The network's grid as basix Q2 cells: the same node sets as the shell mesh's cells and
+    triangles all turned the same way (outward on the tube, as the mesh's cells)."""
+    net, _ = _tube(radius=0.06)
+    cells = dn.q9_cells(net)
+    tri = triangulate_q9(cells)[0]
+    x = net.x0
+    n = np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]])
+    radial = x[tri].mean(axis=1) * [0.0, 1.0, 1.0]
+    side = np.sign(np.einsum("ij,ij->i", n, radial))
+    assert np.all(side == side[0])
+    Xm, mcells = mesh_nodes(
+        cylinder(MPI.COMM_SELF, radius=0.06, length=0.4, n_around=8, n_along=6).mesh
+    )
+    _, idx = cKDTree(x).query(Xm)
+    assert {frozenset(c) for c in idx[mcells]} == {frozenset(c) for c in cells}
+
+
 def test_winding_number_of_rings_about_a_line():
     t = np.linspace(0, 2 * np.pi, 17)[:-1]
     R = _rotation([1.0, -0.5, 2.0], 1.2)
@@ -265,6 +285,13 @@ def test_coarse_pants_donned_on_the_first_frame_end_outside_the_body(body, pants
             assert abs(float(data[f"winding_{s}_hem_about_{o}_shank"])) == (s == o)
     assert abs(float(data["winding_waist_about_pelvis"])) == 1.0
     assert float(data["mesh_leg_spacing"]) >= 2.2 * float(data["mesh_leg_radius"])
+    # the layers never pass through each other: no intersecting triangle pair, counted on the
+    # shell mesh's own cells (dolfinx numbering, nodes matched by position)
+    assert int(data["self_intersections"]) == 0
+    Xm, cells = mesh_nodes(mesh)
+    dist, idx = cKDTree(data["X"]).query(Xm)
+    assert dist.max() < 1e-12
+    assert len(intersecting_pairs(x[idx], triangulate_q9(cells)[0])) == 0
     log = (out / "donning_log.txt").read_text().splitlines()
     assert any(line.startswith("# min_gap = ") for line in log)
     assert "t_s,radius_scale,min_gap_m,contact_nodes,max_strain" in log
