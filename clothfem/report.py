@@ -553,6 +553,25 @@ def _crush_lines(h: dict[str, np.ndarray]) -> list[str]:
     return lines
 
 
+def _intersection_lines(h: dict[str, np.ndarray]) -> list[str]:
+    """The independent self-intersection check of a run with self-contact (at its field
+    frames): the frames checked and, where the fabric passes through itself, a warning."""
+    col = h.get("self_intersections")
+    if col is None or col.dtype.kind != "f" or not np.isfinite(col).any():
+        return []
+    checked = np.flatnonzero(np.isfinite(col))
+    lines = [f"- fabric self-intersections (independent check, {checked.size} frames): "
+             f"{int(np.nanmax(col))} at most"]  # fmt: skip
+    bad = checked[col[checked] > 0]
+    if bad.size:
+        lines.append(
+            f"- warning: the fabric passes through itself ({int(col[bad[0]])} intersecting "
+            f"triangle pairs at t = {h['time'][bad[0]]:.3f} s, the first checked frame with "
+            "any): self-contact cannot undo crossings a run starts with or is handed"
+        )
+    return lines
+
+
 def _torques_lines(s: dict) -> list[str]:
     """The ``[[torques]]`` measures of ``summary.json`` after the settling, one table row each."""
     table = s.get("torques") or {}
@@ -632,6 +651,7 @@ def report_markdown(run_dir: str | Path) -> str:
         lines.append(f"- time shares {of}: {shares}")
     lines += _measures_lines(h, s)
     lines += _torques_lines(s)
+    lines += _intersection_lines(h)
     lines += _crush_lines(h)
     flex = torque_curve(h, "torque_flex")[1] if "torque_flex" in h else None
     if recorded:  # at the gait events (else every 0.25 s)
