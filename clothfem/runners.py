@@ -328,7 +328,15 @@ def contact_log(scene: dict[str, Any]) -> list[str]:
             if c["mu"] > 0
             else "friction: not built (mu = 0)"
         ),
+        *_torques_log(scene),
     ]
+
+
+def _torques_log(scene: dict[str, Any]) -> list[str]:
+    """The log line of the ``[[torques]]`` measures (none without)."""
+    if not scene["torques"]:
+        return []
+    return ["torques: " + ", ".join(f"{t['name']} about {t['segment']}" for t in scene["torques"])]
 
 
 def _aj_mask(scene: dict[str, Any], J: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:

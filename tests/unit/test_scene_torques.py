@@ -74,3 +74,12 @@ def test_torques_need_the_explicit_integrator():
         scenes.validate(
             scenes.apply_overrides(scenes.remove_keys(data, unset), sets), base=SCENE.parent
         )
+
+
+def test_build_log_names_the_measures():
+    from clothfem.runners import contact_log
+
+    s = _validate([{"name": "lk", "segment": "L_shank"}, {"name": "rh", "segment": "R_thigh"}])
+    assert "torques: lk about L_shank, rh about R_thigh" in contact_log(s)
+    s = _validate([])
+    assert not any(line.startswith("torques:") for line in contact_log(s))
