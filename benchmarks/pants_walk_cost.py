@@ -61,10 +61,9 @@ def _walk(
     sets = [f"initial.positions='{donned}'", f"mesh.n_around={mesh[0]}"]
     sets += [f"contact.self_contact={'true' if selfc else 'false'}"]
     sets += [f"mesh.n_along={mesh[1]}", "output.png=false", "output.checkpoint_every=0"]
+    t_full = scenes.load(SCENE, sets)["solver"]["settle_time"] + 2.2
+    sets += [f"solver.settle_time={settle}", f"solver.duration={settle + walk}"]
     scene = scenes.load(SCENE, sets)
-    t_full = scene["solver"]["settle_time"] + 2.2
-    scene["solver"]["settle_time"] = settle
-    scene["solver"]["duration"] = settle + walk
     run_scene(scene, out, comm=COMM, overwrite=True)
     COMM.barrier()
     h, s = read_history(out / "history.csv"), read_summary(out)
