@@ -1377,7 +1377,11 @@ def _list_for(cands, x_now, x_other, surface, p: SelfContactParameters, both=Tru
     if cands is not None and not oversized:
         if cands.valid(*((x_now, x_other) if both else (x_now,))):
             return cands, False, True
-    c = build_candidates(x_now, surface, distance=p.distance, skin=skin, edges=p.edge_proximity)
+    # listed: every pair closer than the contact distance plus its tolerance band, so that the
+    # pairs in contact (gap < d + tol) are the same whichever valid list holds them (a run
+    # resumed with a fresh list repeats the uninterrupted one)
+    reach = p.distance * (1.0 + p.tolerance)
+    c = build_candidates(x_now, surface, distance=reach, skin=skin, edges=p.edge_proximity)
     return c, True, skin >= 6.5 * span or c.valid(x_other)
 
 
@@ -1438,9 +1442,9 @@ _NO_PAIRS = PairContacts(
 def _contacts_now(x0, xs, surface, cands: CandidateList, d, tol, edges, kernel) -> PairContacts:
     """Node-triangle and edge pairs closer than ``d + tol`` at ``xs`` (per node / first
     edge the closest on each side), after the list's bound: build distance less the pair's
-    relative motion since the build."""
+    relative motion since the build (the list holds every pair within ``d + tol``)."""
     D = xs - cands.x_build
-    sel = np.flatnonzero(cands.pt_dist - _relative_motion(D, cands.pt_nodes, 1) < d)
+    sel = np.flatnonzero(cands.pt_dist - _relative_motion(D, cands.pt_nodes, 1) < d + tol)
     if sel.size == 0 and (not edges or len(cands.ee) == 0):
         return _NO_PAIRS
     c = pair_contacts(x0, xs, surface, cands.pt_node[sel], cands.pt_tri[sel], kernel=kernel)
@@ -1448,7 +1452,7 @@ def _contacts_now(x0, xs, surface, cands: CandidateList, d, tol, edges, kernel) 
     c = _closest_per_key(c, c.idx[:, 0])
     if not edges:
         return c
-    sel = np.flatnonzero(cands.ee_dist - _relative_motion(D, cands.ee_nodes, 2) < d)
+    sel = np.flatnonzero(cands.ee_dist - _relative_motion(D, cands.ee_nodes, 2) < d + tol)
     ce = edge_contacts(x0, xs, surface, cands.ee[sel], kernel=kernel)
     close = ce.gap < d + tol
     ce = _closest_per_key(PairContacts(*(a[close] for a in ce)), cands.ee[sel][close, 0])

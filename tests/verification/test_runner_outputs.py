@@ -48,7 +48,7 @@ NEWMARK = [
 ]
 # the CI scene's keys of the static integrator, removed for the EXPLICIT and NEWMARK runs
 UNSET_STATIC = ["solver.steps", "contact.increments"]
-TIMING = ("t_assembly", "t_contact", "t_solve", "t_io", "wall_time", "elapsed")
+TIMING = ("t_assembly", "t_contact", "t_self_contact", "t_solve", "t_io", "wall_time", "elapsed")
 # a child process must not inherit this (singleton) MPI process's environment
 ENV = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
 ENV["OPENBLAS_NUM_THREADS"] = "1"
@@ -266,6 +266,22 @@ def test_resume_bit_for_bit_from_two_checkpoints(tmp_path, sets, picks):
         for a, b in zip(f_ref, fields, strict=True):
             assert np.array_equal(a["displacement"], b["displacement"])
             assert np.array_equal(a["contact_pressure"], b["contact_pressure"])
+
+
+@pytest.mark.slow
+def test_resume_bit_for_bit_with_self_contact(tmp_path):
+    """The arm-sleeve scene (16x20) with fabric self-contact to 50 deg, resumed from the
+    checkpoint at 45.6 deg (row 100) where some 50-75 fabric-fabric pairs are in contact:
+    the resumed run builds a fresh candidate list and repeats the history (but the timers)."""
+    base = _shared(tmp_path)
+    sets = ["contact.self_contact=true", "body.1.angle_max=50", "mesh.n_around=16"]
+    sets += ["mesh.n_along=20", "output.png=false", "output.checkpoint_every=20"]
+    scene = scenes.load(ROOT / "demos" / "scenes" / "arm_sleeve.toml", sets)
+    kept = _run_keeping_checkpoints(scene, base / "reference", (5,))
+    _resume_from(base / "reference", kept[5], base / "resumed", scene)
+    reference = _rows(base / "reference")
+    assert min(int(r["self_pairs"]) for r in reference[100:]) > 20
+    _same_history(reference, _rows(base / "resumed"))
 
 
 def test_resume_keeps_the_torque_table(tmp_path):
