@@ -43,7 +43,7 @@ import os
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -90,6 +90,8 @@ class PlayedMotion:
     motion: Any
     t_end: float
     joint_local: np.ndarray
+    # the last pose asked for: a step asks for the same time once per measure and body use
+    _last: dict = field(default_factory=dict, compare=False, repr=False)
 
     def joint(self, t: float) -> np.ndarray:
         """The proximal joint J1 [m] at t [s], carried with the segment's frame."""
@@ -97,6 +99,16 @@ class PlayedMotion:
         return p.centre + p.rotation @ self.joint_local
 
     def pose(self, t: float) -> Pose:
+        """The pose at t [s] (read-only arrays; the last one is kept for the next call)."""
+        if self._last.get("t") == t:
+            return self._last["pose"]
+        p = self._pose(t)
+        for a in (p.centre, p.rotation, p.velocity, p.angular_velocity):
+            a.setflags(write=False)
+        self._last.update(t=t, pose=p)
+        return p
+
+    def _pose(self, t: float) -> Pose:
         if t >= self.t_end:
             p = self.motion.pose(self.t_end)
             zero = np.zeros(3)
