@@ -688,7 +688,6 @@ class _Layers:
     surface: object | None
     params: object | None
     candidates: object | None = None
-    crossings_left: int = 0
 
     @classmethod
     def build(cls, network: SpringNetwork, relax: Relaxation) -> _Layers:
@@ -715,7 +714,6 @@ class _Layers:
             params=self.params, fixed=model.fixed, candidates=self.candidates,
         )  # fmt: skip
         self.candidates = res.candidates
-        self.crossings_left += res.crossings_left
         if np.array_equal(res.x, new.x) and np.array_equal(res.v, v_half):
             return new
         a = pm.accelerations(model, res.x, res.v)
