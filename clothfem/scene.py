@@ -371,10 +371,11 @@ SCHEMA: dict[str, Section] = {
                 "choice",
                 "integration of membrane and shear: 'psri' (partial selective reduced "
                 "integration, alpha = psri_factor t^2/h^2 of them fully integrated: no "
-                "spurious modes; docs/shell_element.md) or 'sri' (selective reduced, for "
-                "comparison)",
+                "spurious modes; docs/shell_element.md), 'mitc9' (assumed strains from the "
+                "MITC9 tying points; 9-node quadrilaterals and a linear material) or 'sri' "
+                "(selective reduced, for comparison)",
                 default="psri",
-                choices=("psri", "sri"),
+                choices=("psri", "mitc9", "sri"),
             ),
             "psri_factor": Key(
                 "float",

@@ -59,7 +59,10 @@ from .material import (
 )
 from .viscosity import MembraneViscosity
 
-__all__ = ["ShellModel", "Quadrature"]
+__all__ = ["ShellModel", "Quadrature", "SCHEMES"]
+
+#: The ways to integrate membrane and shear (:class:`Quadrature` ``scheme``).
+SCHEMES = ("psri", "sri", "mitc9")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -76,6 +79,11 @@ class Quadrature:
     the six rigid modes; because alpha ~ (t/h)^2 is the ratio of bending to membrane
     stiffness at the mesh scale, it adds at most O(1) x the bending stiffness to
     inextensional modes and so does not lock as t -> 0 (docs/shell_element.md).
+
+    ``scheme = "mitc9"``: assumed covariant membrane and transverse-shear strains from the
+    tying points of MITC9 (Bucalem & Bathe 1993), integrated with the full rule; no
+    spurious modes and no locking without a weight (:mod:`clothfem.shell.mitc`: hand-written
+    kernels; 9-node quadrilaterals and the linear :class:`FabricMaterial` only).
 
     ``scheme = "sri"``: selective reduced integration (Hughes 1987) with a constant blend
     ``stabilization`` of the fully integrated membrane energy (0: plain SRI, which leaves a
@@ -95,8 +103,10 @@ class Quadrature:
         for name in ("full", "reduced"):
             if getattr(self, name) not in range(1, 11):
                 raise ValueError(f"Quadrature {name} must be an integer in 1..10")
-        if self.scheme not in ("psri", "sri"):
-            raise ValueError(f"Quadrature scheme must be 'psri' or 'sri', got {self.scheme!r}")
+        if self.scheme not in SCHEMES:
+            raise ValueError(
+                f"Quadrature scheme must be one of {', '.join(SCHEMES)}, got {self.scheme!r}"
+            )
         if not (0.0 < self.psri_factor <= 1e6):
             raise ValueError(
                 f"Quadrature psri_factor must be in (0, 1e6], got {self.psri_factor!r}"
@@ -105,7 +115,7 @@ class Quadrature:
             raise ValueError(
                 f"Quadrature stabilization must be in [0, 1], got {self.stabilization!r}"
             )
-        if self.scheme == "psri" and self.stabilization != 0.0:
+        if self.scheme != "sri" and self.stabilization != 0.0:
             raise ValueError("Quadrature stabilization is a parameter of scheme 'sri' only")
 
 
@@ -356,7 +366,13 @@ class ShellModel:
         dx_f = ufl.dx(domain=mesh, metadata={"quadrature_degree": quadrature.full})
         dx_r = ufl.dx(domain=mesh, metadata={"quadrature_degree": quadrature.reduced})
         self.dx_full, self.dx_reduced = dx_f, dx_r
-        ds = ufl.Measure("ds", domain=mesh, subdomain_data=self.surface.facet_tags)
+        self._mitc = None
+        if quadrature.scheme == "mitc9":
+            self._build_mitc(quadrature)
+            self.alpha = self.friction = self.viscosity = None
+            self._energy_terms = {"bending": bending_energy(kappa, self.Q, self.t) * dx_f}
+            self._build_load_forms(frame)
+            return
         if isinstance(mat, DecrimpingFabric):  # yarn-direction stiffening (same weights)
             self.yarn = fem.Constant(mesh, mat.yarn_parameters())
             psi_m = decrimping_membrane_energy(eps, self.Q, self.yarn, self.t)
@@ -387,6 +403,28 @@ class ShellModel:
             "bending": bending_energy(kappa, self.Q, self.t) * dx_f,
             "shear": shear,
         }
+        self._build_load_forms(frame)
+
+    def _build_mitc(self, quadrature: Quadrature) -> None:
+        """The MITC9 membrane and shear kernels (linear material, 9-node cells only)."""
+        from .mitc import MitcForms
+
+        mat = self.material
+        if isinstance(mat, DecrimpingFabric) or mat.friction is not None or mat.viscosity:
+            raise ValueError(
+                "element scheme 'mitc9' takes the linear FabricMaterial only (no decrimping, "
+                "yarn friction or viscosity)"
+            )
+        self._mitc = MitcForms(
+            self.V, u=self.u, d=self.d, D=self.D, Q=self.Q, kG=self.kG, t=self.t, warp=self.warp
+        )
+
+    def _build_load_forms(self, frame) -> None:
+        """External work, follower loads and the compiled residual, Jacobian and energy
+        forms of the energy terms and loads."""
+        mesh, u, d = self.mesh, self.u, self.d
+        dx_f = self.dx_full
+        ds = ufl.Measure("ds", domain=mesh, subdomain_data=self.surface.facet_tags)
         Pi = sum(self._energy_terms.values())
 
         # external work of dead loads on u, and non-conservative follower loads
@@ -488,6 +526,9 @@ class ShellModel:
         n = self.n_owned
         self._Kw = fem_petsc.create_matrix_block(self._K_forms)
         self._Rw = fem_petsc.create_vector_block(self._R_forms)
+        if self._mitc is not None:  # the MITC9 membrane and shear, assembled beside
+            self._Rm = fem_petsc.create_vector(self._mitc.R)
+            self._Km = fem_petsc.create_matrix_block(self._mitc.K)
         rw0, rw1 = self._Kw.getOwnershipRange()
         assert rw1 - rw0 == 6 * n
         nv = 5 * n
@@ -739,7 +780,22 @@ class ShellModel:
         with self._Rw.localForm() as loc:
             loc.set(0.0)
         fem_petsc.assemble_vector_block(self._Rw, self._R_forms, self._K_forms, bcs=[])
+        if self._mitc is not None:
+            self._add_mitc_residual()
         self._Rw_at = arr.copy()
+
+    def _add_mitc_residual(self) -> None:
+        """R_w += the MITC9 membrane and shear residual (owned u rows, then d rows)."""
+        vec = self._Rm
+        with vec.localForm() as loc:
+            loc.set(0.0)
+        fem_petsc.assemble_vector(vec, self._mitc.R)
+        vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        n = self.n_owned
+        r6 = vec.getArray(readonly=True).reshape(n, 6)
+        rw = self._Rw.getArray()
+        rw[: 3 * n] += r6[:, :3].ravel()
+        rw[3 * n : 6 * n] += r6[:, 3:].ravel()
 
     def residual(self, x: PETSc.Vec, f: PETSc.Vec) -> None:
         """f = R(x) in the (u, theta) layout, without support conditions."""
@@ -771,6 +827,11 @@ class ShellModel:
         self._Kw.zeroEntries()
         fem_petsc.assemble_matrix_block(self._Kw, self._K_forms, bcs=[])
         self._Kw.assemble()
+        if self._mitc is not None:
+            self._Km.zeroEntries()
+            fem_petsc.assemble_matrix_block(self._Km, self._mitc.K, bcs=[])
+            self._Km.assemble()
+            self._Kw.axpy(1.0, self._Km, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
         if K is None:
             K = self._Kw.ptap(self.rotation_map())
             K.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
@@ -789,7 +850,10 @@ class ShellModel:
     # ------------------------------------------------------------------ outputs
     def strain_energy(self) -> float:
         """Internal strain energy [J] at the current state."""
-        return self.comm.allreduce(fem.assemble_scalar(self._energy_form), op=MPI.SUM)
+        local = fem.assemble_scalar(self._energy_form)
+        if self._mitc is not None:
+            local += sum(fem.assemble_scalar(f) for f in self._mitc.energy.values())
+        return self.comm.allreduce(local, op=MPI.SUM)
 
     def yarn_strain_range(self) -> tuple[float, float]:
         """Smallest and largest Green strain along the yarns (E11, E22 in the lamina frame)
@@ -798,6 +862,16 @@ class ShellModel:
         beyond the strains at the reduced rule's points, the displacement field carries a
         membrane mode that the reduced rule does not see and the PSRI weight alpha (of
         order t^2 / h^2) hardly resists (docs/shell_element.md)."""
+        if self._mitc is not None:  # the assumed strains, which the energy sees
+            e = self._mitc.yarn_strains()
+        else:
+            e = self._yarn_strain_values()
+        lo = float(e.min()) if e.size else math.inf
+        hi = float(e.max()) if e.size else -math.inf
+        return self.comm.allreduce(lo, op=MPI.MIN), self.comm.allreduce(hi, op=MPI.MAX)
+
+    def _yarn_strain_values(self) -> np.ndarray:
+        """E11, E22 of the full membrane rule's points of the owned cells (UFL strains)."""
         if self._yarn_strain is None:
             from ffcx.element_interface import create_quadrature
 
@@ -807,10 +881,7 @@ class ShellModel:
             )
             self._yarn_strain = fem.Expression(ufl.as_vector([eps[0, 0], eps[1, 1]]), points)
         n_cells = self.mesh.topology.index_map(2).size_local
-        e = self._yarn_strain.eval(np.arange(n_cells, dtype=np.int32))
-        lo = float(e.min()) if e.size else math.inf
-        hi = float(e.max()) if e.size else -math.inf
-        return self.comm.allreduce(lo, op=MPI.MIN), self.comm.allreduce(hi, op=MPI.MAX)
+        return self._yarn_strain.eval(np.arange(n_cells, dtype=np.int32))
 
     def external_work(self) -> float:
         """Work of the conservative loads [J] at the current state and load factor."""
@@ -825,10 +896,13 @@ class ShellModel:
 
     def energy_parts(self) -> dict[str, float]:
         """Membrane, bending and shear strain energy [J]."""
-        out = {}
-        for name, form in self._energy_part_forms().items():
-            out[name] = self.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)
-        return out
+        forms = dict(self._energy_part_forms())
+        if self._mitc is not None:
+            forms.update(self._mitc.energy)
+        return {
+            name: self.comm.allreduce(fem.assemble_scalar(forms[name]), op=MPI.SUM)
+            for name in ("membrane", "bending", "shear")
+        }
 
     def _energy_part_forms(self):
         if not hasattr(self, "_part_forms"):

@@ -1,0 +1,509 @@
+"""Assumed covariant membrane and transverse-shear strains of the 9-node shell (MITC9).
+
+Bucalem & Bathe (1993): the covariant strains in the cell's reference coordinates (r, s),
+
+    e_rr = (x_r . x_r - X_r . X_r) / 2,   e_ss, e_rs alike,   g_r = x_r . d - X_r . D,
+
+are sampled at tying points and interpolated back over the cell:
+
+    e_rr, g_r   at r in the 2-point and s in the 3-point Gauss abscissae, linear in r,
+                quadratic in s;
+    e_ss, g_s   the same with r and s exchanged;
+    e_rs        at the 2 x 2 Gauss points, bilinear.
+
+The energy is the model's membrane and shear energy (:mod:`clothfem.shell.material`) of
+these assumed strains, turned into the lamina frame (warp, weft) at the 3 x 3 Gauss
+points, where it is integrated: with T_ia = G^i . e_a (G^i the contravariant reference
+base vectors, e_a the lamina frame), eps_ab = T_ia T_jb e_ij and gamma_a = T_ia g_i, which
+with the tying points replaced by the 3 x 3 points themselves is the fully integrated
+energy of :func:`clothfem.shell.kinematics.shell_strains` (the ``"full"`` tying, a test of
+the kernels).
+
+Why hand-written kernels and not UFL: the assumed strain at one point needs the fields at
+other points of the same cell, which UFL (2022.2) cannot express, and FFCx (0.5) cannot
+tabulate the higher reference derivatives a Taylor shift would need
+(docs/shell_element.md). The kernels below are dolfinx cell kernels (numba ``cfunc``) for
+the energy, the residual (u and d node by node) and the Jacobian blocks, with the same arguments
+(coefficients u, d, D; constants Q, kG, t, warp) as the UFL forms they complement. The
+material is the linear orthotropic St. Venant-Kirchhoff law of
+:class:`~clothfem.shell.material.FabricMaterial`; all strains are Green strains, so the
+energy is quadratic in the tying strains with a geometry-only matrix.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import basix
+import numba
+import numpy as np
+from dolfinx import cpp as _cpp
+from dolfinx import fem
+
+__all__ = ["MitcForms", "tying_tables"]
+
+_G2 = np.array([0.5 - 0.5 / math.sqrt(3.0), 0.5 + 0.5 / math.sqrt(3.0)])
+_G3 = np.array([0.5 - 0.5 * math.sqrt(0.6), 0.5, 0.5 + 0.5 * math.sqrt(0.6)])
+_W3 = np.array([5.0, 8.0, 5.0]) / 18.0
+
+
+def _lagrange(nodes: np.ndarray, x: float) -> np.ndarray:
+    """The 1-D Lagrange basis through ``nodes`` at ``x``."""
+    out = np.ones(len(nodes))
+    for a, xa in enumerate(nodes):
+        for b, xb in enumerate(nodes):
+            if a != b:
+                out[a] *= (x - xb) / (xa - xb)
+    return out
+
+
+def _grid(r: np.ndarray, s: np.ndarray) -> np.ndarray:
+    return np.array([[ri, sj] for sj in s for ri in r])
+
+
+def tying_tables(tying: str = "mitc9") -> dict[str, np.ndarray]:
+    """The constant tables of the kernels on the reference cell [0, 1]^2.
+
+    ``tying = "mitc9"``: the tying points and interpolation above; ``"full"``: every strain
+    at the 3 x 3 points (identity interpolation), the fully integrated energy.
+    Returns the integration points ``q`` (9, 2) and weights ``w`` (9); per tying set
+    k = 0 (e_rr, g_r), 1 (e_ss, g_s), 2 (e_rs) its points and the interpolation matrix
+    ``P{k}`` (9 x n_k); and the Q2 shape functions at all of them (basix, dolfinx's order).
+    """
+    if tying not in ("mitc9", "full"):
+        raise ValueError(f"tying must be 'mitc9' or 'full', got {tying!r}")
+    q = _grid(_G3, _G3)
+    w = np.array([wr * ws for ws in _W3 for wr in _W3])
+    if tying == "full":
+        sets = [(_G3, _G3)] * 3
+    else:
+        sets = [(_G2, _G3), (_G3, _G2), (_G2, _G2)]
+    element = basix.create_element(
+        basix.ElementFamily.P, basix.CellType.quadrilateral, 2, basix.LagrangeVariant.gll_warped
+    )
+    out = {"q": q, "w": w}
+    tab = element.tabulate(1, q)  # (3, 9 points, 9 shape functions, 1)
+    out["Nq"], out["dNq"] = tab[0, :, :, 0], np.stack([tab[1, :, :, 0], tab[2, :, :, 0]], -1)
+    for k, (r, s) in enumerate(sets):
+        pts = _grid(r, s)
+        P = np.array([np.outer(_lagrange(s, qs), _lagrange(r, qr)).ravel() for qr, qs in q])
+        tab = element.tabulate(1, pts)
+        out[f"points{k}"], out[f"P{k}"] = pts, P
+        out[f"N{k}"] = tab[0, :, :, 0]
+        out[f"dN{k}"] = np.stack([tab[1, :, :, 0], tab[2, :, :, 0]], -1)
+    return out
+
+
+# kernel outputs
+ENERGY_MEMBRANE, ENERGY_SHEAR, R_UD, K_UU, K_UD, K_DU, K_DD = range(7)
+
+
+@numba.njit(cache=True)
+def _offsets(P0, P1, P2):
+    """Where each strain component's tying values start in the vector e: (e_rr, e_ss,
+    e_rs, g_r, g_s); and its length."""
+    n0, n1, n2 = P0.shape[1], P1.shape[1], P2.shape[1]
+    return np.array([0, n0, n0 + n1, n0 + n1 + n2, 2 * n0 + n1 + n2]), 2 * n0 + 2 * n1 + n2
+
+
+@numba.njit(cache=True)
+def _tying_strains(coords, coef, tabs):
+    """The tying strains e, and per tying point (all sets in order, (points, 3)) the current
+    tangents x_r, x_s and the director d: what the first and second derivatives of e are
+    made of (:func:`_strain_derivatives`, :func:`_add_residual`).
+
+    The strains are formed from the displacement derivatives (e_rr = X_r . u_r + u_r . u_r
+    / 2, g_r = X_r . (d - D) + u_r . d), not as differences of the current and reference
+    metrics, whose round-off grows with the coordinates' size."""
+    off, ne = _offsets(tabs[2][0], tabs[2][1], tabs[2][2])
+    e = np.zeros(ne)
+    n_points = tabs[3][0].shape[0] + tabs[3][1].shape[0] + tabs[3][2].shape[0]
+    xr, xs, dd = np.zeros((n_points, 3)), np.zeros((n_points, 3)), np.zeros((n_points, 3))
+    ur, us, Xr, Xs, dp, Dp = (
+        np.empty(3),
+        np.empty(3),
+        np.empty(3),
+        np.empty(3),
+        np.empty(3),
+        np.empty(3),
+    )
+    start = 0
+    for k in range(3):
+        N, dN = tabs[3][k], tabs[4][k]
+        for p in range(N.shape[0]):
+            for c in range(3):
+                a_ur = a_us = a_Xr = a_Xs = a_d = a_D = 0.0
+                for a in range(9):
+                    X, u = coords[3 * a + c], coef[3 * a + c]
+                    r, s_ = dN[p, a, 0], dN[p, a, 1]
+                    a_ur += r * u
+                    a_us += s_ * u
+                    a_Xr += r * X
+                    a_Xs += s_ * X
+                    if k < 2:
+                        a_d += N[p, a] * coef[27 + 3 * a + c]
+                        a_D += N[p, a] * coef[54 + 3 * a + c]
+                ur[c], us[c], Xr[c], Xs[c], dp[c], Dp[c] = a_ur, a_us, a_Xr, a_Xs, a_d, a_D
+            i = start + p
+            for c in range(3):
+                xr[i, c], xs[i, c], dd[i, c] = Xr[c] + ur[c], Xs[c] + us[c], dp[c]
+            if k == 2:
+                acc = 0.0
+                for c in range(3):
+                    acc += Xr[c] * us[c] + ur[c] * Xs[c] + ur[c] * us[c]
+                e[off[2] + p] = 0.5 * acc
+                continue
+            uk, Xk = (ur, Xr) if k == 0 else (us, Xs)
+            ee = eg = 0.0
+            for c in range(3):
+                ee += Xk[c] * uk[c] + 0.5 * uk[c] * uk[c]
+                eg += Xk[c] * (dp[c] - Dp[c]) + uk[c] * dp[c]
+            e[off[k] + p], e[off[3 + k] + p] = ee, eg
+        start += N.shape[0]
+    return e, xr, xs, dd
+
+
+@numba.njit(cache=True)
+def _add_residual(out, s, xr, xs, dd, tabs):
+    """out (54, node by node (u_a, d_a)) += B^T s, B = de/d(u, d), without forming B."""
+    off, _ = _offsets(tabs[2][0], tabs[2][1], tabs[2][2])
+    start = 0
+    for k in range(3):
+        N, dN = tabs[3][k], tabs[4][k]
+        for p in range(N.shape[0]):
+            i = start + p
+            if k == 2:
+                se = 0.5 * s[off[2] + p]
+                for a in range(9):
+                    r, q = se * dN[p, a, 0], se * dN[p, a, 1]
+                    for c in range(3):
+                        out[6 * a + c] += r * xs[i, c] + q * xr[i, c]
+                continue
+            se, sg = s[off[k] + p], s[off[3 + k] + p]
+            x = xr if k == 0 else xs
+            for a in range(9):
+                r, n_ = dN[p, a, k], N[p, a] * sg
+                for c in range(3):
+                    out[6 * a + c] += r * (se * x[i, c] + sg * dd[i, c])
+                    out[6 * a + 3 + c] += n_ * x[i, c]
+        start += N.shape[0]
+
+
+@numba.njit(cache=True)
+def _strain_derivatives(xr, xs, dd, tabs):
+    """B = de/d(u, d), (len(e), 54): u_a at columns 3 a + c, d_a at 27 + 3 a + c."""
+    off, ne = _offsets(tabs[2][0], tabs[2][1], tabs[2][2])
+    B = np.zeros((ne, 54))
+    start = 0
+    for k in range(3):
+        N, dN = tabs[3][k], tabs[4][k]
+        for p in range(N.shape[0]):
+            i = start + p
+            if k == 2:
+                for a in range(9):
+                    r, q = 0.5 * dN[p, a, 0], 0.5 * dN[p, a, 1]
+                    for c in range(3):
+                        B[off[2] + p, 3 * a + c] = r * xs[i, c] + q * xr[i, c]
+                continue
+            x = xr if k == 0 else xs
+            row_e, row_g = off[k] + p, off[3 + k] + p
+            for a in range(9):
+                r, n_ = dN[p, a, k], N[p, a]
+                for c in range(3):
+                    B[row_e, 3 * a + c] = r * x[i, c]
+                    B[row_g, 3 * a + c] = r * dd[i, c]
+                    B[row_g, 27 + 3 * a + c] = n_ * x[i, c]
+        start += N.shape[0]
+    return B
+
+
+@numba.njit(cache=True)
+def _frame(coords, const, dNq, A, T):
+    """At one integration point (shape derivatives ``dNq`` (9, 2)): fills A (3, 3), the map
+    from the covariant membrane strains (e_rr, e_ss, e_rs) to the lamina ones (E11, E22,
+    2 E12), and T (2, 2), T_ia = G^i . e_a, the map of the shear strains; returns the area
+    Jacobian."""
+    j0, j1 = np.zeros(3), np.zeros(3)
+    for a in range(9):
+        for c in range(3):
+            j0[c] += dNq[a, 0] * coords[3 * a + c]
+            j1[c] += dNq[a, 1] * coords[3 * a + c]
+    n0 = j0[1] * j1[2] - j0[2] * j1[1]
+    n1 = j0[2] * j1[0] - j0[0] * j1[2]
+    n2 = j0[0] * j1[1] - j0[1] * j1[0]
+    det = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    n0, n1, n2 = n0 / det, n1 / det, n2 / det
+    wn = const[12] * n0 + const[13] * n1 + const[14] * n2
+    w0, w1, w2 = const[12] - wn * n0, const[13] - wn * n1, const[14] - wn * n2
+    wl = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    a0, a1, a2 = w0 / wl, w1 / wl, w2 / wl  # e1
+    b0, b1, b2 = n1 * a2 - n2 * a1, n2 * a0 - n0 * a2, n0 * a1 - n1 * a0  # e2 = n x e1
+    g00 = j0[0] * j0[0] + j0[1] * j0[1] + j0[2] * j0[2]
+    g01 = j0[0] * j1[0] + j0[1] * j1[1] + j0[2] * j1[2]
+    g11 = j1[0] * j1[0] + j1[1] * j1[1] + j1[2] * j1[2]
+    dg = g00 * g11 - g01 * g01
+    # T_ia = G^i . e_a with G^0 = (g11 j0 - g01 j1) / dg, G^1 = (g00 j1 - g01 j0) / dg
+    j0e1 = j0[0] * a0 + j0[1] * a1 + j0[2] * a2
+    j1e1 = j1[0] * a0 + j1[1] * a1 + j1[2] * a2
+    j0e2 = j0[0] * b0 + j0[1] * b1 + j0[2] * b2
+    j1e2 = j1[0] * b0 + j1[1] * b1 + j1[2] * b2
+    t00, t01 = (g11 * j0e1 - g01 * j1e1) / dg, (g11 * j0e2 - g01 * j1e2) / dg
+    t10, t11 = (g00 * j1e1 - g01 * j0e1) / dg, (g00 * j1e2 - g01 * j0e2) / dg
+    T[0, 0], T[0, 1], T[1, 0], T[1, 1] = t00, t01, t10, t11
+    A[0, 0], A[0, 1], A[0, 2] = t00 * t00, t10 * t10, 2.0 * t00 * t10
+    A[1, 0], A[1, 1], A[1, 2] = t01 * t01, t11 * t11, 2.0 * t01 * t11
+    A[2, 0], A[2, 1], A[2, 2] = 2.0 * t00 * t01, 2.0 * t10 * t11, 2.0 * (t00 * t11 + t10 * t01)
+    return det
+
+
+@numba.njit(cache=True)
+def _stiffness(D, A, T, const, scale):
+    """Fills D (5, 5), the stiffness on (e_rr, e_ss, e_rs, g_r, g_s) times ``scale``:
+    A^T Q A (membrane) and T diag(kG) T^T (shear), Q = const[0:9], kG = const[9:11]."""
+    D[:, :] = 0.0
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for k in range(3):
+                for m in range(3):
+                    acc += A[k, i] * const[3 * k + m] * A[m, j]
+            D[i, j] = scale * acc
+    for i in range(2):
+        for j in range(2):
+            D[3 + i, 3 + j] = scale * (const[9] * T[i, 0] * T[j, 0] + const[10] * T[i, 1] * T[j, 1])
+
+
+@numba.njit(cache=True)
+def _cell_stiffness(coords, const, tabs):
+    """The stiffness of every integration point of every cell, (cells, 81): per point the
+    upper triangles of its membrane block (D00, D01, D02, D11, D12, D22) and shear block
+    (D33, D34, D44) of :func:`_stiffness`, times weight, area Jacobian and thickness. It
+    depends on the reference geometry and the material only, so it is computed once."""
+    w, dNq = tabs[0], tabs[1]
+    out = np.zeros((coords.shape[0], 81))
+    A, T, D = np.empty((3, 3)), np.empty((2, 2)), np.empty((5, 5))
+    for cell in range(coords.shape[0]):
+        for qp in range(len(w)):
+            det = _frame(coords[cell], const, dNq[qp], A, T)
+            _stiffness(D, A, T, const, w[qp] * det * const[11])
+            o = 9 * qp
+            out[cell, o : o + 3] = D[0, 0:3]
+            out[cell, o + 3 : o + 5] = D[1, 1:3]
+            out[cell, o + 5] = D[2, 2]
+            out[cell, o + 6 : o + 8] = D[3, 3:5]
+            out[cell, o + 8] = D[4, 4]
+    return out
+
+
+@numba.njit(cache=True)
+def _yarn_strains(coords, coefs, const, tabs):
+    """Lamina Green strains (E11, E22) of the assumed membrane strains at the integration
+    points of every cell: (cells, points, 2). ``coords`` (cells, 27), ``coefs`` (cells, 81)."""
+    dNq, Ps = tabs[1], tabs[2]
+    off, _ = _offsets(Ps[0], Ps[1], Ps[2])
+    out = np.zeros((coords.shape[0], dNq.shape[0], 2))
+    E, A, T = np.zeros(3), np.zeros((3, 3)), np.zeros((2, 2))
+    for cell in range(coords.shape[0]):
+        e = _tying_strains(coords[cell], coefs[cell], tabs)[0]
+        for qp in range(dNq.shape[0]):
+            _frame(coords[cell], const, dNq[qp], A, T)
+            for c in range(3):
+                E[c] = np.dot(Ps[c][qp], e[off[c] : off[c] + Ps[c].shape[1]])
+            out[cell, qp, 0] = np.dot(A[0], E)
+            out[cell, qp, 1] = np.dot(A[1], E)
+    return out
+
+
+@numba.njit(cache=True)
+def _geometric(K, s, mode, tabs):
+    """K += sum_k s_k d2 e_k / d(row) d(col) for the block of ``mode`` (identity in the
+    three components)."""
+    if mode == K_DD:
+        return
+    off, _ = _offsets(tabs[2][0], tabs[2][1], tabs[2][2])
+    for k in range(3):
+        N, dN = tabs[3][k], tabs[4][k]
+        for p in range(N.shape[0]):
+            for a in range(9):
+                for b in range(9):
+                    if mode == K_UU:
+                        if k == 2:
+                            v = 0.5 * (dN[p, a, 0] * dN[p, b, 1] + dN[p, a, 1] * dN[p, b, 0])
+                            v *= s[off[2] + p]
+                        else:
+                            v = s[off[k] + p] * dN[p, a, k] * dN[p, b, k]
+                    elif k == 2:
+                        continue
+                    elif mode == K_UD:
+                        v = s[off[3 + k] + p] * dN[p, a, k] * N[p, b]
+                    else:  # K_DU: row d_a, column u_b
+                        v = s[off[3 + k] + p] * N[p, a] * dN[p, b, k]
+                    for c in range(3):
+                        K[3 * a + c, 3 * b + c] += v
+
+
+@numba.njit(cache=True)
+def _cell(out, coef, const, coords, mode, tabs):
+    """One output of a cell: its membrane or shear energy, the residual (u_a, d_a node by
+    node) or a Jacobian block (``mode``), added to ``out``. ``tabs``: (w, dNq, (P0, P1,
+    P2), (N0, N1, N2), (dN0, dN1, dN2)) of :func:`tying_tables`."""
+    w, Ps = tabs[0], tabs[2]
+    sets = (0, 1, 2, 0, 1)  # the tying set of each component (e_rr, e_ss, e_rs, g_r, g_s)
+    off, ne = _offsets(Ps[0], Ps[1], Ps[2])
+    e, xr, xs, dd = _tying_strains(coords, coef, tabs)
+    s = np.zeros(ne)
+    DD = np.zeros((ne, ne)) if mode >= K_UU else np.zeros((1, 1))
+    D = np.zeros((5, 5))  # the membrane-shear coupling stays 0
+    E, S = np.empty(5), np.empty(5)
+    energy = 0.0
+    for qp in range(len(w)):
+        o = 81 + 9 * qp  # this point's stiffness (_cell_stiffness)
+        D[0, 0], D[0, 1], D[0, 2] = coef[o], coef[o + 1], coef[o + 2]
+        D[1, 1], D[1, 2], D[2, 2] = coef[o + 3], coef[o + 4], coef[o + 5]
+        D[3, 3], D[3, 4], D[4, 4] = coef[o + 6], coef[o + 7], coef[o + 8]
+        D[1, 0], D[2, 0], D[2, 1], D[4, 3] = D[0, 1], D[0, 2], D[1, 2], D[3, 4]
+        for c in range(5):
+            Pc = Ps[sets[c]]
+            acc = 0.0
+            for i in range(Pc.shape[1]):
+                acc += Pc[qp, i] * e[off[c] + i]
+            E[c] = acc
+        for i in range(5):
+            acc = 0.0
+            for j in range(5):
+                acc += D[i, j] * E[j]
+            S[i] = acc
+        if mode == ENERGY_MEMBRANE:  # D is block diagonal: membrane | shear
+            energy += 0.5 * (E[0] * S[0] + E[1] * S[1] + E[2] * S[2])
+        elif mode == ENERGY_SHEAR:
+            energy += 0.5 * (E[3] * S[3] + E[4] * S[4])
+        for c in range(5):
+            Pc = Ps[sets[c]]
+            for i in range(Pc.shape[1]):
+                s[off[c] + i] += Pc[qp, i] * S[c]
+        if mode >= K_UU:
+            for c1 in range(5):
+                for c2 in range(5):
+                    if D[c1, c2] == 0.0:
+                        continue
+                    r1, r2 = Ps[sets[c1]][qp], Ps[sets[c2]][qp]
+                    for i in range(r1.shape[0]):
+                        for j in range(r2.shape[0]):
+                            DD[off[c1] + i, off[c2] + j] += D[c1, c2] * r1[i] * r2[j]
+    if mode <= ENERGY_SHEAR:
+        out[0] += energy
+    elif mode == R_UD:
+        _add_residual(out, s, xr, xs, dd, tabs)
+    else:
+        B = _strain_derivatives(xr, xs, dd, tabs)
+        ra = 0 if mode in (K_UU, K_UD) else 27
+        ca = 0 if mode in (K_UU, K_DU) else 27
+        Br = np.ascontiguousarray(B[:, ra : ra + 27].T)
+        K = Br @ (DD @ np.ascontiguousarray(B[:, ca : ca + 27]))
+        _geometric(K, s, mode, tabs)
+        for i in range(27):
+            for j in range(27):
+                out[27 * i + j] += K[i, j]
+
+
+_SIGNATURE = numba.types.void(
+    numba.types.CPointer(numba.types.double),
+    numba.types.CPointer(numba.types.double),
+    numba.types.CPointer(numba.types.double),
+    numba.types.CPointer(numba.types.double),
+    numba.types.CPointer(numba.types.int32),
+    numba.types.CPointer(numba.types.uint8),
+)
+_SIZES = {ENERGY_MEMBRANE: 1, ENERGY_SHEAR: 1, R_UD: 54}
+
+
+def _kernel(tabs: tuple, mode: int):
+    """A dolfinx cell kernel (numba cfunc) of one output of :func:`_cell`."""
+    size = _SIZES.get(mode, 27 * 27)
+
+    @numba.cfunc(_SIGNATURE, nopython=True)
+    def kernel(A_, w_, c_, coords_, local_index, permutation):
+        out = numba.carray(A_, (size,))
+        coef = numba.carray(w_, (162,))
+        const = numba.carray(c_, (15,))
+        coords = numba.carray(coords_, (27,))
+        _cell(out, coef, const, coords, mode, tabs)
+
+    return kernel
+
+
+@functools.cache
+def _kernels(tying: str) -> tuple[tuple, dict]:
+    """The tables of a tying scheme and its seven compiled kernels (once per process)."""
+    tab = tying_tables(tying)
+    tabs = (tab["w"], tab["dNq"]) + tuple(
+        tuple(np.ascontiguousarray(tab[f"{name}{k}"]) for k in range(3))
+        for name in ("P", "N", "dN")
+    )
+    return tabs, {m: _kernel(tabs, m) for m in range(7)}
+
+
+class MitcForms:
+    """The compiled MITC9 membrane + shear forms of a 9-node shell (dolfinx cpp Forms with
+    numba kernels): ``energy`` (membrane, shear), the residual ``R`` on ``V6`` (the Q2
+    space with six components per node: (R_u, R_d) of each node, in V's node order) and
+    Jacobian blocks ``K`` = [[K_uu, K_ud], [K_du, K_dd]], in the layout of the UFL forms of
+    :class:`~clothfem.shell.model.ShellModel` (u and d in the same vector space V).
+
+    V: the (u, d) space (9-node quadrilaterals, degree 2); u, d, D: displacement, current
+    and reference directors; Q, kG, t, warp: the model's constants (plane-stress stiffness
+    3x3 [Pa], (k G13, k G23) [Pa], thickness [m], warp direction). The stiffness of every
+    integration point (``stiffness``, a DG0 field of 81 values per cell) is computed here
+    from the reference geometry and these constants' values: later changes of the
+    constants do not reach the kernels.
+    """
+
+    def __init__(self, V: fem.FunctionSpace, *, u, d, D, Q, kG, t, warp, tying: str = "mitc9"):
+        mesh = V.mesh
+        if mesh.topology.cell_type.name != "quadrilateral" or V.ufl_element().degree() != 2:
+            raise ValueError("the MITC9 element needs 9-node quadrilaterals (degree 2)")
+        if mesh.geometry.cmap.degree != 2:
+            raise ValueError("the MITC9 element needs a second-order (9-node) mesh geometry")
+        self._tabs, self._kernels = _kernels(tying)  # kept alive with the forms
+        self._mesh = mesh
+        const = np.concatenate([np.ravel(c.value) for c in (Q, kG, t, warp)])
+        n_cells = len(mesh.geometry.dofmap.offsets) - 1  # owned and ghost cells
+        W = fem.VectorFunctionSpace(mesh, ("DG", 0), dim=81)
+        self.stiffness = fem.Function(W, name="mitc_stiffness")
+        if n_cells:
+            values = _cell_stiffness(self._coords(n_cells), const, self._tabs)
+            dofs = W.dofmap.list.array.reshape(-1)[:n_cells]
+            self.stiffness.x.array.reshape(-1, 81)[dofs] = values
+        coeffs = [f._cpp_object for f in (u, d, D, self.stiffness)]
+        consts = [c._cpp_object for c in (Q, kG, t, warp)]
+
+        def form(mode: int, spaces: list):
+            integrals = {_cpp.fem.IntegralType.cell: ([(-1, self._kernels[mode].address)], None)}
+            cpp_spaces = [s._cpp_object for s in spaces]
+            return _cpp.fem.Form_float64(cpp_spaces, integrals, coeffs, consts, False, mesh._mesh)
+
+        self.energy = {"membrane": form(ENERGY_MEMBRANE, []), "shear": form(ENERGY_SHEAR, [])}
+        # the residual node by node, (u_a, d_a): one kernel call per cell
+        self.V6 = fem.VectorFunctionSpace(mesh, (V.ufl_element().family(), 2), dim=6)
+        self.R = form(R_UD, [self.V6])
+        self.K = [
+            [form(K_UU, [V, V]), form(K_UD, [V, V])],
+            [form(K_DU, [V, V]), form(K_DD, [V, V])],
+        ]
+
+    def _coords(self, n_cells: int) -> np.ndarray:
+        """The node coordinates of the first ``n_cells`` local cells, (n_cells, 27)."""
+        geo = self._mesh.geometry
+        nodes = geo.dofmap.array.reshape(-1, 9)[:n_cells]
+        return np.ascontiguousarray(geo.x[nodes].reshape(n_cells, 27))
+
+    def yarn_strains(self) -> np.ndarray:
+        """(E11, E22) of the assumed membrane strains at the 3 x 3 points of every owned
+        cell, (cells, 9, 2), at the current state (no collective call)."""
+        form = self.energy["membrane"]
+        coefs = _cpp.fem.pack_coefficients(form)[(_cpp.fem.IntegralType.cell, -1)]
+        const = _cpp.fem.pack_constants(form)
+        n_cells = self._mesh.topology.index_map(2).size_local
+        coefs = np.ascontiguousarray(coefs[:n_cells])
+        return _yarn_strains(self._coords(n_cells), coefs, const, self._tabs)
