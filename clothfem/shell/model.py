@@ -831,7 +831,8 @@ class ShellModel:
             self._Km.zeroEntries()
             fem_petsc.assemble_matrix_block(self._Km, self._mitc.K, bcs=[])
             self._Km.assemble()
-            self._Kw.axpy(1.0, self._Km, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            # both come from cell integrals over the same spaces: the same sparsity
+            self._Kw.axpy(1.0, self._Km, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         if K is None:
             K = self._Kw.ptap(self.rotation_map())
             K.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)

@@ -95,6 +95,24 @@ def test_full_tying_equals_the_ufl_forms(panel):
             assert B.norm(PETSc.NormType.INFINITY) < 1e-12 * A.norm(PETSc.NormType.INFINITY)
 
 
+def test_full_tying_model_equals_the_fully_integrated_model(panel):
+    """Through the model's assembly (the kernel residual split into u and d rows, the
+    kernel Jacobian added to the UFL one): a model whose MITC forms use the full tying
+    gives the residual, Jacobian and energy of the UFL model with alpha = 1."""
+    ref = ShellModel(panel, material=MAT, thickness=0.01, quadrature=Quadrature(psri_factor=1e6))
+    m = ShellModel(panel, material=MAT, thickness=0.01, quadrature=MITC9)
+    m._mitc = MitcForms(m.V, u=m.u, d=m.d, D=m.D, Q=m.Q, kG=m.kG, t=m.t, warp=m.warp, tying="full")
+    x = random_state(ref, 0.05, 5)
+    ra, rb = x.duplicate(), x.duplicate()
+    ref.residual(x, ra)
+    m.residual(x, rb)
+    assert (ra - rb).norm() < 1e-12 * ra.norm()
+    Ka, Kb = ref.jacobian(x), m.jacobian(x)
+    Kb.axpy(-1.0, Ka)
+    assert Kb.norm(PETSc.NormType.INFINITY) < 1e-12 * Ka.norm(PETSc.NormType.INFINITY)
+    assert math.isclose(m.strain_energy(), ref.strain_energy(), rel_tol=1e-12)
+
+
 def test_residual_node_order():
     """The residual kernel's six-component space numbers its nodes as V does (the model
     splits its (u_a, d_a) rows by that order)."""

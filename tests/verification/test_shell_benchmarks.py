@@ -129,3 +129,60 @@ def test_clamped_plate_does_not_lock(slenderness):
     for n in (8, 16):
         res = V.run_clamped_plate(n=n, slenderness=slenderness)
         assert res.error < 2e-3, res
+
+
+# ---------------------------------------------------------------- the MITC9 element
+MITC9 = V.Quadrature(scheme="mitc9")
+
+
+def test_mitc9_linear_benchmarks_converge_to_the_published_values():
+    """MITC9 (assumed membrane and shear strains) on the linear benchmarks, at 8x8 and
+    16x16: Scordelis-Lo (0.3024) and the hemisphere (0.094, two digits) within 1.1 % and
+    closer on the finer mesh (measured 2026-12-02: -0.77 / -0.50 % and -1.08 / -0.56 %;
+    both approach from below, as MITC elements do); the pinched cylinder's log(1/h) point
+    load term as for the default element (+0.30 / +0.92 %)."""
+    for run, tol in ((V.run_scordelis_lo, 0.011), (V.run_hemisphere, 0.011)):
+        coarse, fine = (run(n=n, quadrature=MITC9) for n in (8, 16))
+        assert coarse.error < tol and fine.error < 0.01, (coarse, fine)
+        assert fine.error < coarse.error, (coarse, fine)
+    for n in (8, 16):
+        assert V.run_pinched_cylinder(n=n, quadrature=MITC9).error < 0.013
+
+
+@pytest.mark.parametrize("slenderness", [100.0, 1000.0, 10000.0])
+def test_mitc9_clamped_plate_does_not_lock(slenderness):
+    """The clamped plate from t/a = 1/100 to 1/10000 with MITC9 on 8x8 and 16x16: within
+    0.2 % of Kirchhoff's deflection for the thin plates; at t/a = 1/100 the shear
+    flexibility of a Reissner-Mindlin plate adds about 0.25 % (the selective rule, which
+    does not lock, gives +0.25 / +0.20 % there, MITC9 +0.24 %), so 0.3 %."""
+    tol = 3e-3 if slenderness == 100.0 else 2e-3
+    for n in (8, 16):
+        res = V.run_clamped_plate(n=n, slenderness=slenderness, quadrature=MITC9)
+        assert res.error < tol, res
+
+
+def test_mitc9_bending_converges_at_the_cubic_rate():
+    """The arc under an end moment (this model's exact arc), L2 error of u at 4, 8, 16
+    cells: rate 3 of quadratic elements from the coarsest mesh on (no PSRI weight adds
+    parasitic energy: measured 2026-12-02 8.5e-5 at 8 cells, 9.4x below PSRI's 8.0e-4)."""
+    errs = [V.run_arc_bending(nx=n, quadrature=MITC9).value for n in (4, 8, 16)]
+    rates = [math.log2(errs[i] / errs[i + 1]) for i in range(2)]
+    assert min(rates) > 2.8, (errs, rates)
+
+
+def test_mitc9_nonlinear_curves():
+    """Sze 3.1 and 3.2 (elastica and roll-up, exact) and the pinched semi-cylinder (Sze
+    3.7, P/Pmax = 0.1 .. 1, 12x12) with MITC9. The elastica within 1e-4 on 20 cells; the
+    roll-up within 1e-3 at 1/4, 1/2 and all of the moment on 20 cells. At 3/4 of it every
+    element converges to w/L = 0.21172 instead of the circle's 0.21221 (-0.23 %; MITC9,
+    SRI and PSRI on 40 cells, measured 2026-12-02: a property of the model's end moment on a
+    270-degree arc, not of the element), so that point is checked for convergence: its
+    value changes by less than 3e-4 from 20 to 40 cells. The semi-cylinder within 1.2 %
+    (0.16 % at P = 2000; measured 2026-12-02: +1.06, +0.63, +0.02, +1.07, +0.16 %)."""
+    assert max(_errors(V.run_elastica_curve(nx=20, quadrature=MITC9))) < 1e-4
+    fine, finer = (V.run_rollup_curve(nx=n, quadrature=MITC9) for n in (20, 40))
+    assert max(p.result.error for p in fine if p.fraction != 0.75) < 1e-3, fine
+    w20, w40 = (next(p.result.value for p in c if p.fraction == 0.75) for c in (fine, finer))
+    assert abs(w20 - w40) < 3e-4 * w40, (w20, w40)
+    pts = V.run_semicylinder(n=12, quadrature=MITC9)
+    assert pts[-1].result.error < 3e-3 and max(_errors(pts)) < 0.012, pts
