@@ -943,6 +943,7 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
                 f"must be >= 2.2 leg_radius = {2.2 * leg:.4g} m (a gap for the crotch arch), "
                 f"got {spacing!r}",
             )
+    _validate_element(out)
     _validate_body(data, out)
     _validate_mocap(out, base=None if base is None else Path(base))
     _validate_initial(out, base=None if base is None else Path(base))
@@ -1190,6 +1191,26 @@ def _validate_decrimping(given: dict[str, Any], mat: dict[str, Any]) -> None:
                 f"must be in (0, transition{i} = {mat[f'transition{i}']:g}], "
                 f"got {mat[f'width{i}']!r}",
             )
+
+
+def _validate_element(out: dict[str, Any]) -> None:
+    """element.scheme = 'mitc9' needs what its kernels implement: 9-node quadrilaterals
+    (degree 2, order-2 geometry) and the linear material without history."""
+    if out["element"]["scheme"] != "mitc9":
+        return
+    mat, m = out["material"], out["mesh"]
+    if mat["law"] != "linear" or mat["viscosity1"] is not None or mat["friction_stress1"]:
+        _fail(
+            "element.scheme",
+            "'mitc9' takes material.law = 'linear' without viscosity or yarn friction; "
+            "use 'psri' for this material",
+        )
+    if out["element"]["degree"] != 2 or m["order"] != 2 or m["cell"] != "quadrilateral":
+        _fail(
+            "element.scheme",
+            "'mitc9' needs 9-node quadrilaterals: mesh.cell = 'quadrilateral', mesh.order = 2 "
+            "and element.degree = 2",
+        )
 
 
 def _validate_body(data: dict[str, Any], out: dict[str, Any]) -> None:

@@ -218,3 +218,26 @@ def test_mitc9_refuses_what_it_does_not_support(panel):
     tri = meshes.strip(COMM, length=1.0, width=1.0, nx=2, ny=2, cell="triangle")
     with pytest.raises(ValueError, match="9-node quadrilaterals"):
         ShellModel(tri, material=MAT, thickness=1e-3, quadrature=MITC9)
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        ["mesh.order=1"],
+        ["mesh.cell=triangle"],
+        [f"material.viscosity{k}=1" for k in ("1", "2", "12")],
+        ["material.preset=crimped-cotton-hysteretic"],
+        ["material.preset=decrimping-cotton"],
+    ],
+)
+def test_scene_refuses_mitc9_where_it_does_not_apply(overrides):
+    """A scene asking for element.scheme = 'mitc9' with a mesh or material its kernels do
+    not implement fails at validation with one line naming the key."""
+    from pathlib import Path
+
+    from clothfem import scene as scenes
+
+    path = Path(__file__).parents[2] / "demos" / "scenes" / "arm_sleeve.toml"
+    with pytest.raises(scenes.SceneError, match="scene key 'element.scheme': 'mitc9'"):
+        scenes.load(path, ["element.scheme=mitc9", *overrides])
+    assert scenes.load(path, ["element.scheme=mitc9"])["element"]["scheme"] == "mitc9"
