@@ -142,9 +142,15 @@ LADDER: list[dict[str, Any]] = [
     {"name": "explicit24x30", **MESH24},
     # the time step (half the base's), the geometry order, the element order
     {"name": "safety0.45", "solver.safety": 0.45},
-    {"name": "order1", "mesh.order": 1},
+    {"name": "order1", "mesh.order": 1, "element.scheme": "psri"},  # MITC9: 9-node cells
     # degree-1 u and theta on the mesh with the base's node count
-    {"name": "degree1_32x40", "element.degree": 1, "mesh.n_around": 32, "mesh.n_along": 40},
+    {
+        "name": "degree1_32x40",
+        "element.degree": 1,
+        "mesh.n_around": 32,
+        "mesh.n_along": 40,
+        "element.scheme": "psri",
+    },
     # implicit: Newmark (gamma 0.6) + Lagrange-multiplier contact, dt 0.01 s; quasi-static
     {"name": "newmark8x10", **NEWMARK, "mesh.n_around": 8, "mesh.n_along": 10},
     {"name": "newmark12x16", **NEWMARK, "mesh.n_around": 12, "mesh.n_along": 16},
