@@ -547,8 +547,9 @@ def _crush_lines(h: dict[str, np.ndarray]) -> list[str]:
             where = f"{h['angle_deg'][bad[0]]:.1f} deg"
         lines.append(
             f"- warning: a yarn is compressed below E = {CRUSHED} (stretch < 0.77) at some "
-            f"integration point from {where} on: a fold or an element membrane mode the mesh "
-            "does not resolve (docs/shell_element.md); results past there carry it"
+            f"integration point from {where} on: a fold the mesh does not resolve, or the "
+            "membrane mode of the partial selective element (element.scheme = 'psri'; MITC9 "
+            "has none: docs/shell_element.md); results past there carry it"
         )
     return lines
 

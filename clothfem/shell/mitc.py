@@ -32,7 +32,6 @@ energy is quadratic in the tying strains with a geometry-only matrix.
 
 from __future__ import annotations
 
-import functools
 import math
 
 import basix
@@ -415,33 +414,41 @@ _SIGNATURE = numba.types.void(
     numba.types.CPointer(numba.types.int32),
     numba.types.CPointer(numba.types.uint8),
 )
-_SIZES = {ENERGY_MEMBRANE: 1, ENERGY_SHEAR: 1, R_UD: 54}
 
 
-def _kernel(tabs: tuple, mode: int):
-    """A dolfinx cell kernel (numba cfunc) of one output of :func:`_cell`."""
-    size = _SIZES.get(mode, 27 * 27)
-
-    @numba.cfunc(_SIGNATURE, nopython=True)
-    def kernel(A_, w_, c_, coords_, local_index, permutation):
-        out = numba.carray(A_, (size,))
-        coef = numba.carray(w_, (162,))
-        const = numba.carray(c_, (15,))
-        coords = numba.carray(coords_, (27,))
-        _cell(out, coef, const, coords, mode, tabs)
-
-    return kernel
-
-
-@functools.cache
-def _kernels(tying: str) -> tuple[tuple, dict]:
-    """The tables of a tying scheme and its seven compiled kernels (once per process)."""
+def _tables_tuple(tying: str) -> tuple:
+    """:func:`tying_tables` as the kernels take them: (w, dNq, (P0, P1, P2), (N0, N1, N2),
+    (dN0, dN1, dN2))."""
     tab = tying_tables(tying)
-    tabs = (tab["w"], tab["dNq"]) + tuple(
+    return (tab["w"], tab["dNq"]) + tuple(
         tuple(np.ascontiguousarray(tab[f"{name}{k}"]) for k in range(3))
         for name in ("P", "N", "dN")
     )
-    return tabs, {m: _kernel(tabs, m) for m in range(7)}
+
+
+# the two tying schemes, compiled into the one kernel below as constants
+_TABS = {"mitc9": _tables_tuple("mitc9"), "full": _tables_tuple("full")}
+_TABS_MITC9, _TABS_FULL = _TABS["mitc9"], _TABS["full"]
+#: Position of the kernel's output mode and tying scheme (0: mitc9, 1: full) in its
+#: constants, after the model's 15 (Q, kG, t, warp).
+MODE, TYING = 15, 16
+
+
+@numba.cfunc(_SIGNATURE, nopython=True, cache=True)
+def _kernel(A_, w_, c_, coords_, local_index, permutation):
+    """The dolfinx cell kernel of every output of :func:`_cell`: the output (``mode``) and
+    the tying scheme come in the form's constants, so one compiled function (cached on
+    disk) serves all forms. ``A_`` is viewed at the largest element tensor's size; each
+    output writes only its own entries."""
+    const = numba.carray(c_, (17,))
+    out = numba.carray(A_, (27 * 27,))
+    coef = numba.carray(w_, (162,))
+    coords = numba.carray(coords_, (27,))
+    mode = int(const[MODE])
+    if const[TYING] == 0.0:
+        _cell(out, coef, const, coords, mode, _TABS_MITC9)
+    else:
+        _cell(out, coef, const, coords, mode, _TABS_FULL)
 
 
 class MitcForms:
@@ -465,8 +472,9 @@ class MitcForms:
             raise ValueError("the MITC9 element needs 9-node quadrilaterals (degree 2)")
         if mesh.geometry.cmap.degree != 2:
             raise ValueError("the MITC9 element needs a second-order (9-node) mesh geometry")
-        self._tabs, self._kernels = _kernels(tying)  # kept alive with the forms
-        self._mesh = mesh
+        if tying not in _TABS:
+            raise ValueError(f"tying must be 'mitc9' or 'full', got {tying!r}")
+        self._tabs, self._mesh = _TABS[tying], mesh
         const = np.concatenate([np.ravel(c.value) for c in (Q, kG, t, warp)])
         n_cells = len(mesh.geometry.dofmap.offsets) - 1  # owned and ghost cells
         W = fem.VectorFunctionSpace(mesh, ("DG", 0), dim=81)
@@ -477,11 +485,17 @@ class MitcForms:
             self.stiffness.x.array.reshape(-1, 81)[dofs] = values
         coeffs = [f._cpp_object for f in (u, d, D, self.stiffness)]
         consts = [c._cpp_object for c in (Q, kG, t, warp)]
+        scheme = fem.Constant(mesh, float(list(_TABS).index(tying)))
+        self._constants = [scheme]  # kept alive with the forms
 
         def form(mode: int, spaces: list):
-            integrals = {_cpp.fem.IntegralType.cell: ([(-1, self._kernels[mode].address)], None)}
+            self._constants.append(fem.Constant(mesh, float(mode)))
+            tail = [self._constants[-1]._cpp_object, scheme._cpp_object]
+            integrals = {_cpp.fem.IntegralType.cell: ([(-1, _kernel.address)], None)}
             cpp_spaces = [s._cpp_object for s in spaces]
-            return _cpp.fem.Form_float64(cpp_spaces, integrals, coeffs, consts, False, mesh._mesh)
+            return _cpp.fem.Form_float64(
+                cpp_spaces, integrals, coeffs, consts + tail, False, mesh._mesh
+            )
 
         self.energy = {"membrane": form(ENERGY_MEMBRANE, []), "shear": form(ENERGY_SHEAR, [])}
         # the residual node by node, (u_a, d_a): one kernel call per cell
