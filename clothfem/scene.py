@@ -1280,8 +1280,9 @@ def check_boundaries(scene: dict[str, Any], names: Sequence[str], source: str) -
 
 def mesh_file_problem(scene: dict[str, Any]) -> str | None:
     """Why a ``generator = "file"`` mesh cannot be used (one line), else None: the file must
-    exist, be a gmsh mesh with 2-D elements and no 3-D ones (a surface), and have the
-    boundaries the scene names as physical groups of its curves (gmsh; serial)."""
+    exist, be a gmsh mesh with 2-D elements and no 3-D ones (a surface), of 9-node
+    quadrilaterals only for element.scheme = 'mitc9', and have the boundaries the scene
+    names as physical groups of its curves (gmsh; serial)."""
     path = Path(scene["mesh"]["file"])
     key = "scene key 'mesh.file'"
     if not path.is_file():
@@ -1296,6 +1297,14 @@ def mesh_file_problem(scene: dict[str, Any]) -> str | None:
             return f"{key}: {path.name!r} holds no mesh nodes"
         if not len(gmsh.model.mesh.getElements(2)[0]) or len(gmsh.model.mesh.getElements(3)[0]):
             return f"{key}: {path.name!r} must be a surface mesh (2-D elements, none 3-D)"
+        quad9 = 10  # gmsh's element type of the 9-node quadrilateral
+        if scene["element"]["scheme"] == "mitc9" and set(gmsh.model.mesh.getElements(2)[0]) != {
+            quad9
+        }:
+            return (
+                "scene key 'element.scheme': 'mitc9' needs 9-node quadrilaterals; "
+                f"{path.name!r} has other 2-D elements (use 'psri')"
+            )
         groups = gmsh.model.getPhysicalGroups(1)
         names = [gmsh.model.getPhysicalName(1, tag) or f"tag{tag}" for _, tag in groups]
     except Exception as exc:  # gmsh raises a bare Exception

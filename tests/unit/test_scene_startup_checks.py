@@ -69,6 +69,10 @@ def test_file_mesh_boundaries_and_dimension(tmp_path, capsys):
     assert (
         "'supports[0].where': must name a boundary of the square.msh mesh, one of ['left']" in err
     )
+    mitc9 = [*sets, "element.scheme=mitc9"]  # the square is of 3-node triangles
+    assert main([*args, *[a for kv in mitc9 for a in ("--set", kv)]]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "'element.scheme': 'mitc9' needs 9-node quadrilaterals" in err
     cube = _square(tmp_path / "cube.msh", dim=3)
     solid = [f"mesh.file='{cube}'" if s.startswith("mesh.file") else s for s in sets]
     assert main([*args, *[a for kv in solid for a in ("--set", kv)]]) == 2
