@@ -528,7 +528,6 @@ class ShellModel:
         self._Rw = fem_petsc.create_vector_block(self._R_forms)
         if self._mitc is not None:  # the MITC9 membrane and shear, assembled beside
             self._Rm = fem_petsc.create_vector(self._mitc.R)
-            self._Km = fem_petsc.create_matrix_block(self._mitc.K)
         rw0, rw1 = self._Kw.getOwnershipRange()
         assert rw1 - rw0 == 6 * n
         nv = 5 * n
@@ -826,13 +825,9 @@ class ShellModel:
         Rw = self._Rw
         self._Kw.zeroEntries()
         fem_petsc.assemble_matrix_block(self._Kw, self._K_forms, bcs=[])
+        if self._mitc is not None:  # added into the same matrix: the same cell couplings
+            fem_petsc.assemble_matrix_block(self._Kw, self._mitc.K, bcs=[])
         self._Kw.assemble()
-        if self._mitc is not None:
-            self._Km.zeroEntries()
-            fem_petsc.assemble_matrix_block(self._Km, self._mitc.K, bcs=[])
-            self._Km.assemble()
-            # both come from cell integrals over the same spaces: the same sparsity
-            self._Kw.axpy(1.0, self._Km, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         if K is None:
             K = self._Kw.ptap(self.rotation_map())
             K.setOption(PETSc.Mat.Option.KEEP_NONZERO_PATTERN, True)
