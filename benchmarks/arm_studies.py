@@ -173,9 +173,7 @@ def study_cases(study: str, args: argparse.Namespace) -> list[Case]:
         return [
             Case(
                 f"{law}_mu{mu:g}",
-                # the nonlinear and hysteretic laws run on the partial selective element
-                # (MITC9 takes the linear law only): every law on it, like with like
-                [f"material.preset={law}", f"contact.mu={mu:g}", "element.scheme=psri"],
+                [f"material.preset={law}", f"contact.mu={mu:g}"],
                 {"law": law, "mu": mu},
             )
             for mu in (0.1, 0.5)

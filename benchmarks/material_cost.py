@@ -11,7 +11,11 @@ other jobs on the machine change it less than wall time). The ratio of the media
 rounds is printed, and, with ``--step-ms``, the ratio for a whole explicit step whose
 material-independent part (contact, integrator, output) takes that many milliseconds.
 
-    .venv/bin/python benchmarks/material_cost.py [--mesh 24x30] [--calls 200] [--rounds 5]
+``--scheme`` picks the element (``psri``, the default, or ``mitc9``, whose kernels evaluate
+the laws at their 3 x 3 points).
+
+    .venv/bin/python benchmarks/material_cost.py [--mesh 24x30] [--calls 200] [--rounds 5] \
+        [--scheme mitc9]
 """
 
 import argparse
@@ -25,7 +29,7 @@ from clothfem import mesh as meshes
 from clothfem import scene as scenes
 from clothfem.io import rank0_print
 from clothfem.run import build_material
-from clothfem.shell import ShellModel
+from clothfem.shell import Quadrature, ShellModel
 
 LAWS = {
     "linear": {"preset": "crimped-cotton"},
@@ -64,12 +68,18 @@ def main() -> None:
     parser.add_argument("--calls", type=_positive, default=200, help="steps per model and round")
     parser.add_argument("--rounds", type=_positive, default=5)
     parser.add_argument("--step-ms", type=float, default=None, help="rest of a step [ms]")
+    parser.add_argument("--scheme", choices=("psri", "mitc9"), default="psri", help="element")
     args = parser.parse_args()
     na, nl = args.mesh
     comm = MPI.COMM_WORLD
     sleeve = meshes.cylinder(comm, radius=0.06, length=0.5, n_around=na, n_along=nl)
     models = {
-        name: ShellModel(sleeve, material=material(table), thickness=1e-3)
+        name: ShellModel(
+            sleeve,
+            material=material(table),
+            thickness=1e-3,
+            quadrature=Quadrature(scheme=args.scheme),
+        )
         for name, table in LAWS.items()
     }
     rng = np.random.default_rng(1 + comm.rank)
@@ -99,7 +109,8 @@ def main() -> None:
     med = {name: float(np.median(v)) for name, v in times.items()}
     base = med["linear"]
     rank0_print(
-        f"sleeve {na}x{nl} ({na * nl} cells), {comm.size} rank(s), {args.rounds} rounds of "
+        f"sleeve {na}x{nl} ({na * nl} cells), element {args.scheme}, {comm.size} rank(s), "
+        f"{args.rounds} rounds of "
         f"{args.calls} steps; median CPU ms per force assembly + commit:"
     )
     for name, v in med.items():

@@ -37,7 +37,9 @@ def curve_rows(label, points):
 def benchmark_rows(q):
     rows = []
     for n in (10, 20):
-        rows += curve_rows("roll-up w/L (Sze 3.2, exact arc)", V.run_rollup_curve(nx=n, quadrature=q))
+        rows += curve_rows(
+            "roll-up w/L (Sze 3.2, exact arc)", V.run_rollup_curve(nx=n, quadrature=q)
+        )
     for n in (10, 20):
         rows += curve_rows(
             "elastica w/L (Sze 3.1, exact)", V.run_elastica_curve(nx=n, quadrature=q)

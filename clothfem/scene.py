@@ -372,7 +372,7 @@ SCHEMA: dict[str, Section] = {
                 "integration of membrane and shear: 'psri' (partial selective reduced "
                 "integration, alpha = psri_factor t^2/h^2 of them fully integrated: no "
                 "spurious modes; docs/shell_element.md), 'mitc9' (assumed strains from the "
-                "MITC9 tying points; 9-node quadrilaterals and a linear material) or 'sri' "
+                "MITC9 tying points; 9-node quadrilaterals) or 'sri' "
                 "(selective reduced, for comparison)",
                 default="psri",
                 choices=("psri", "mitc9", "sri"),
@@ -1195,16 +1195,10 @@ def _validate_decrimping(given: dict[str, Any], mat: dict[str, Any]) -> None:
 
 def _validate_element(out: dict[str, Any]) -> None:
     """element.scheme = 'mitc9' needs what its kernels implement: 9-node quadrilaterals
-    (degree 2, order-2 geometry) and the linear material without history."""
+    (degree 2, order-2 geometry)."""
     if out["element"]["scheme"] != "mitc9":
         return
-    mat, m = out["material"], out["mesh"]
-    if mat["law"] != "linear" or mat["viscosity1"] is not None or mat["friction_stress1"]:
-        _fail(
-            "element.scheme",
-            "'mitc9' takes material.law = 'linear' without viscosity or yarn friction; "
-            "use 'psri' for this material",
-        )
+    m = out["mesh"]
     if out["element"]["degree"] != 2 or m["order"] != 2 or m["cell"] != "quadrilateral":
         _fail(
             "element.scheme",

@@ -360,7 +360,7 @@ def rollup_tip_model(fraction: float) -> tuple[float, float]:
     strain -t^2 k^2 / 12 shortens the arc and turns it further than the inextensible circle of
     :func:`rollup_tip`: on the strip (t / L = 1/100) w/L is 0.211718 against 0.212207 at 3/4
     of the moment (-0.23 %), and the closing tip stays 1.4e-6 L from the root."""
-    L, b, t = STRIP["length"], STRIP["width"], STRIP["thickness"]
+    L, t = STRIP["length"], STRIP["thickness"]
     moment = fraction * 2 * math.pi * _EI() / L
     k, stretch = arc_solution(moment=moment, EI=_EI(), thickness=t)
     r = stretch / k  # radius of the deformed arc [m]

@@ -33,6 +33,7 @@ it separately).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import dolfinx
@@ -148,6 +149,7 @@ class YarnFriction(PointHistory):
         *,
         degree: int,
         dx: ufl.Measure,
+        point_strains: Callable[[], np.ndarray] | None = None,
     ) -> None:
         self.friction, self.t = friction, t
         self.k = fem.Constant(mesh, friction.parameters())
@@ -159,6 +161,7 @@ class YarnFriction(PointHistory):
             strains=strains,
             t=t,
             dx=dx,
+            point_strains=point_strains,
             names=("yarn_friction", "yarn_dissipation"),
         )
         H = self.history

@@ -25,9 +25,15 @@ tabulate the higher reference derivatives a Taylor shift would need
 (docs/shell_element.md). The kernels below are dolfinx cell kernels (numba ``cfunc``) for
 the energy, the residual (u and d node by node) and the Jacobian blocks, with the same arguments
 (coefficients u, d, D; constants Q, kG, t, warp) as the UFL forms they complement. The
-material is the linear orthotropic St. Venant-Kirchhoff law of
-:class:`~clothfem.shell.material.FabricMaterial`; all strains are Green strains, so the
-energy is quadratic in the tying strains with a geometry-only matrix.
+material is the orthotropic St. Venant-Kirchhoff law of
+:class:`~clothfem.shell.material.FabricMaterial`, quadratic in the tying strains with a
+geometry-only matrix (precomputed per point), plus, where the material has them, the terms
+that act on the lamina strains (E11, E22, 2 E12) of the assumed membrane strains at each
+3 x 3 point, each diagonal in those three components: the decrimping stiffening of
+:class:`~clothfem.shell.material.DecrimpingFabric`, the Dahl yarn friction of
+:mod:`clothfem.shell.hysteresis` and the Kelvin-Voigt viscosity of
+:mod:`clothfem.shell.viscosity` (their histories at the same points, the Quadrature
+functions of the model's rule of degree 4, read by the kernel).
 """
 
 from __future__ import annotations
@@ -296,22 +302,96 @@ def _cell_stiffness(coords, const, tabs):
 
 
 @numba.njit(cache=True)
-def _yarn_strains(coords, coefs, const, tabs):
-    """Lamina Green strains (E11, E22) of the assumed membrane strains at the integration
-    points of every cell: (cells, points, 2). ``coords`` (cells, 27), ``coefs`` (cells, 81)."""
-    dNq, Ps = tabs[1], tabs[2]
+def _cell_frames(coords, const, tabs):
+    """Per integration point of every cell, (cells, points, 10): the map A of :func:`_frame`
+    (row by row) and the weight times the area Jacobian. Geometry only, computed once."""
+    w, dNq = tabs[0], tabs[1]
+    out = np.zeros((coords.shape[0], dNq.shape[0], 10))
+    A, T = np.empty((3, 3)), np.empty((2, 2))
+    for cell in range(coords.shape[0]):
+        for qp in range(dNq.shape[0]):
+            det = _frame(coords[cell], const, dNq[qp], A, T)
+            for i in range(3):
+                for j in range(3):
+                    out[cell, qp, 3 * i + j] = A[i, j]
+            out[cell, qp, 9] = w[qp] * det
+    return out
+
+
+@numba.njit(cache=True)
+def _lamina_strains(coords, coefs, frames, tabs):
+    """Lamina Green strains (E11, E22, E12) of the assumed membrane strains at the
+    integration points of every cell: (cells, points, 3). ``coords`` (cells, 27), ``coefs``
+    (cells, >= 81), ``frames`` of :func:`_cell_frames`."""
+    Ps = tabs[2]
     off, _ = _offsets(Ps[0], Ps[1], Ps[2])
-    out = np.zeros((coords.shape[0], dNq.shape[0], 2))
-    E, A, T = np.zeros(3), np.zeros((3, 3)), np.zeros((2, 2))
+    out = np.zeros((coords.shape[0], frames.shape[1], 3))
+    E = np.zeros(3)
     for cell in range(coords.shape[0]):
         e = _tying_strains(coords[cell], coefs[cell], tabs)[0]
-        for qp in range(dNq.shape[0]):
-            _frame(coords[cell], const, dNq[qp], A, T)
+        for qp in range(frames.shape[1]):
+            A = frames[cell, qp]
             for c in range(3):
-                E[c] = np.dot(Ps[c][qp], e[off[c] : off[c] + Ps[c].shape[1]])
-            out[cell, qp, 0] = np.dot(A[0], E)
-            out[cell, qp, 1] = np.dot(A[1], E)
+                acc = 0.0
+                for i in range(Ps[c].shape[1]):
+                    acc += Ps[c][qp, i] * e[off[c] + i]
+                E[c] = acc
+            for k in range(3):
+                out[cell, qp, k] = A[3 * k] * E[0] + A[3 * k + 1] * E[1] + A[3 * k + 2] * E[2]
+            out[cell, qp, 2] *= 0.5
     return out
+
+
+@numba.njit(cache=True)
+def _ramp(s):
+    """P, p = P', h = P'' of the decrimping ramp (:func:`clothfem.shell.material.yarn_ramp`)."""
+    if s <= -1.0:
+        return 0.0, 0.0, 0.0
+    if s >= 1.0:
+        return 0.5 * s * s + 0.1, s, 1.0
+    P = 0.25 * (0.2 + s * (0.75 + s * (1.0 + s * (0.5 - 0.05 * s * s))))
+    p = 0.25 * (0.75 + s * (2.0 + s * (1.5 - 0.25 * s * s)))
+    return P, p, 0.25 * (2.0 + 3.0 * s - s * s * s)
+
+
+@numba.njit(cache=True)
+def _law(L, const, coef, qp, sig, tan):
+    """The material terms on the lamina strains L = (E11, E22, 2 E12) at point ``qp`` (in the
+    kernels' order): returns their energy density [J/m^3] and fills their stresses ``sig``
+    (d/dL) and diagonal tangents ``tan`` (d2/dL2). Decrimping (const[17:23]: dE, et, w per
+    yarn), Dahl friction (const[23:27]: k, S per yarn; history (E_n, s_n) at
+    coef[const[32]]) and viscosity (const[27:30] on E11, E22, E12, const[30] = 1 / h;
+    history E_n at coef[const[33]]). The histories are in the rule's point order: point
+    (r_i, s_j) of the kernels is its point 3 i + j."""
+    sig[:], tan[:] = 0.0, 0.0
+    phi = 0.0
+    f = 3 * (qp % 3) + qp // 3  # this point in the history's (Quadrature function's) order
+    for i in range(2):
+        dE, et, w = const[17 + 3 * i], const[18 + 3 * i], const[19 + 3 * i]
+        if dE > 0.0:
+            P, p, h = _ramp((L[i] - et) / w)
+            phi += dE * w * w * P
+            sig[i] += dE * w * p
+            tan[i] += dE * h
+    o = int(const[32])
+    if o >= 0:
+        for i in range(2):
+            k, S = const[23 + 2 * i], const[24 + 2 * i]
+            d, sn = L[i] - coef[o + 4 * f + i], coef[o + 4 * f + 2 + i]
+            g = 1.0 if d >= 0.0 else -1.0
+            q = math.exp(-k * g * d / S)
+            phi += S * g * d + (g * sn - S) * (S / k) * (1.0 - q) + sn * sn / (2.0 * k)
+            sig[i] += g * S + (sn - g * S) * q
+            tan[i] += k * q * (1.0 - g * sn / S)
+    o = int(const[33])
+    if o >= 0 and const[30] > 0.0:
+        for j in range(3):
+            c = const[30] * const[27 + j]
+            d = (L[j] if j < 2 else 0.5 * L[2]) - coef[o + 3 * f + j]
+            phi += 0.5 * c * d * d
+            sig[j] += c * d if j < 2 else 0.5 * c * d
+            tan[j] += c if j < 2 else 0.25 * c
+    return phi
 
 
 @numba.njit(cache=True)
@@ -355,6 +435,8 @@ def _cell(out, coef, const, coords, mode, tabs):
     DD = np.zeros((ne, ne)) if mode >= K_UU else np.zeros((1, 1))
     D = np.zeros((5, 5))  # the membrane-shear coupling stays 0
     E, S = np.empty(5), np.empty(5)
+    law = const[31] != 0.0
+    A, L, sig, tan = np.empty((3, 3)), np.empty(3), np.empty(3), np.empty(3)
     energy = 0.0
     for qp in range(len(w)):
         o = 81 + 9 * qp  # this point's stiffness (_cell_stiffness)
@@ -377,6 +459,22 @@ def _cell(out, coef, const, coords, mode, tabs):
             energy += 0.5 * (E[0] * S[0] + E[1] * S[1] + E[2] * S[2])
         elif mode == ENERGY_SHEAR:
             energy += 0.5 * (E[3] * S[3] + E[4] * S[4])
+        if law:  # the material terms on the lamina strains L = A E
+            o = 162 + 10 * qp  # this point's A and weight x area Jacobian (_cell_frames)
+            for i in range(3):
+                for j in range(3):
+                    A[i, j] = coef[o + 3 * i + j]
+            scale = coef[o + 9] * const[11]
+            for i in range(3):
+                L[i] = A[i, 0] * E[0] + A[i, 1] * E[1] + A[i, 2] * E[2]
+            phi = _law(L, const, coef, qp, sig, tan)
+            if mode == ENERGY_MEMBRANE:
+                energy += scale * phi
+            for i in range(3):
+                for k in range(3):
+                    S[i] += scale * A[k, i] * sig[k]
+                    for j in range(3):
+                        D[i, j] += scale * A[k, i] * tan[k] * A[k, j]
         for c in range(5):
             Pc = Ps[sets[c]]
             for i in range(Pc.shape[1]):
@@ -430,8 +528,16 @@ def _tables_tuple(tying: str) -> tuple:
 _TABS = {"mitc9": _tables_tuple("mitc9"), "full": _tables_tuple("full")}
 _TABS_MITC9, _TABS_FULL = _TABS["mitc9"], _TABS["full"]
 #: Position of the kernel's output mode and tying scheme (0: mitc9, 1: full) in its
-#: constants, after the model's 15 (Q, kG, t, warp).
-MODE, TYING = 15, 16
+#: constants, after the model's 15 (Q, kG, t, warp); then the material terms of
+#: :func:`_law` (decrimping 6, friction 4, viscosity 3 and 1 / h) and the layout: LAW (1 if
+#: any term), the offsets of the friction and viscosity histories among the coefficients
+#: (-1: none).
+MODE, TYING, LAW = 15, 16, 31
+N_CONST = 34
+#: The coefficients: u, d, D (27 each), the point stiffness (81); with material terms the
+#: point frames (10 a point, :func:`_cell_frames`), the friction history (4 a point) and the
+#: viscosity history (3 a point) where present.
+N_COEF = 162 + 90 + 36 + 27
 
 
 @numba.cfunc(_SIGNATURE, nopython=True, cache=True)
@@ -440,9 +546,9 @@ def _kernel(A_, w_, c_, coords_, local_index, permutation):
     the tying scheme come in the form's constants, so one compiled function (cached on
     disk) serves all forms. ``A_`` is viewed at the largest element tensor's size; each
     output writes only its own entries."""
-    const = numba.carray(c_, (17,))
+    const = numba.carray(c_, (N_CONST,))
     out = numba.carray(A_, (27 * 27,))
-    coef = numba.carray(w_, (162,))
+    coef = numba.carray(w_, (N_COEF,))
     coords = numba.carray(coords_, (27,))
     mode = int(const[MODE])
     if const[TYING] == 0.0:
@@ -463,10 +569,30 @@ class MitcForms:
     3x3 [Pa], (k G13, k G23) [Pa], thickness [m], warp direction). The stiffness of every
     integration point (``stiffness``, a DG0 field of 81 values per cell) is computed here
     from the reference geometry and these constants' values: later changes of the
-    constants do not reach the kernels.
+    constants do not reach the kernels. The material terms, where the material has them:
+    ``yarn`` the decrimping constants (2 x 3, :meth:`DecrimpingFabric.yarn_parameters`),
+    ``friction`` a :class:`~clothfem.shell.hysteresis.YarnFriction` and ``viscosity`` a
+    :class:`~clothfem.shell.viscosity.MembraneViscosity`, both with their history on the
+    rule of degree 4 (the 3 x 3 points); their constants (e.g. the viscosity's 1 / h) are
+    read at every assembly.
     """
 
-    def __init__(self, V: fem.FunctionSpace, *, u, d, D, Q, kG, t, warp, tying: str = "mitc9"):
+    def __init__(
+        self,
+        V: fem.FunctionSpace,
+        *,
+        u,
+        d,
+        D,
+        Q,
+        kG,
+        t,
+        warp,
+        tying: str = "mitc9",
+        yarn: fem.Constant | None = None,
+        friction=None,
+        viscosity=None,
+    ):
         mesh = V.mesh
         if mesh.topology.cell_type.name != "quadrilateral" or V.ufl_element().degree() != 2:
             raise ValueError("the MITC9 element needs 9-node quadrilaterals (degree 2)")
@@ -479,18 +605,31 @@ class MitcForms:
         n_cells = len(mesh.geometry.dofmap.offsets) - 1  # owned and ghost cells
         W = fem.VectorFunctionSpace(mesh, ("DG", 0), dim=81)
         self.stiffness = fem.Function(W, name="mitc_stiffness")
-        if n_cells:
-            values = _cell_stiffness(self._coords(n_cells), const, self._tabs)
-            dofs = W.dofmap.list.array.reshape(-1)[:n_cells]
-            self.stiffness.x.array.reshape(-1, 81)[dofs] = values
-        coeffs = [f._cpp_object for f in (u, d, D, self.stiffness)]
+        coords = self._coords(n_cells)
+        dofs = W.dofmap.list.array.reshape(-1)[:n_cells]
+        self.stiffness.x.array.reshape(-1, 81)[dofs] = _cell_stiffness(coords, const, self._tabs)
+        self._frames = _cell_frames(coords, const, self._tabs)  # local cells, owned first
+        coefficients = [u, d, D, self.stiffness]
+        law, layout = self._law_constants(mesh, yarn, friction, viscosity)
+        if layout.value[0]:  # the point frames, for the material terms
+            F = fem.VectorFunctionSpace(mesh, ("DG", 0), dim=90)
+            self.frames = fem.Function(F, name="mitc_frames")
+            self.frames.x.array.reshape(-1, 90)[dofs] = self._frames.reshape(n_cells, 90)
+            coefficients.append(self.frames)
+        for history, dim in ((friction, 4), (viscosity, 3)):
+            if history is not None:
+                if history.history.x.array.size != dim * 9 * n_cells:
+                    raise ValueError("the MITC9 material history needs the 3 x 3 points a cell")
+                coefficients.append(history.history)
+        coeffs = [f._cpp_object for f in coefficients]
         consts = [c._cpp_object for c in (Q, kG, t, warp)]
         scheme = fem.Constant(mesh, float(list(_TABS).index(tying)))
-        self._constants = [scheme]  # kept alive with the forms
+        self._constants = [scheme, *law, layout]  # kept alive with the forms
 
         def form(mode: int, spaces: list):
             self._constants.append(fem.Constant(mesh, float(mode)))
             tail = [self._constants[-1]._cpp_object, scheme._cpp_object]
+            tail += [c._cpp_object for c in (*law, layout)]
             integrals = {_cpp.fem.IntegralType.cell: ([(-1, _kernel.address)], None)}
             cpp_spaces = [s._cpp_object for s in spaces]
             return _cpp.fem.Form_float64(
@@ -506,18 +645,49 @@ class MitcForms:
             [form(K_DU, [V, V]), form(K_DD, [V, V])],
         ]
 
+    @staticmethod
+    def _law_constants(mesh, yarn, friction, viscosity) -> tuple[list, fem.Constant]:
+        """The constants of :func:`_law` (zeros for an absent term) and the layout
+        (LAW, friction offset, viscosity offset)."""
+        law = [
+            yarn if yarn is not None else fem.Constant(mesh, np.zeros((2, 3))),
+            friction.k if friction is not None else fem.Constant(mesh, np.zeros((2, 2))),
+            viscosity.eta if viscosity is not None else fem.Constant(mesh, np.zeros(3)),
+            viscosity.inv_h if viscosity is not None else fem.Constant(mesh, 0.0),
+        ]
+        any_law = any(x is not None for x in (yarn, friction, viscosity))
+        offset, layout = 162 + 90 * any_law, [float(any_law)]
+        for history, dim in ((friction, 4), (viscosity, 3)):
+            layout.append(float(offset) if history is not None else -1.0)
+            offset += 9 * dim if history is not None else 0
+        return law, fem.Constant(mesh, np.array(layout))
+
     def _coords(self, n_cells: int) -> np.ndarray:
         """The node coordinates of the first ``n_cells`` local cells, (n_cells, 27)."""
         geo = self._mesh.geometry
         nodes = geo.dofmap.array.reshape(-1, 9)[:n_cells]
         return np.ascontiguousarray(geo.x[nodes].reshape(n_cells, 27))
 
-    def yarn_strains(self) -> np.ndarray:
-        """(E11, E22) of the assumed membrane strains at the 3 x 3 points of every owned
-        cell, (cells, 9, 2), at the current state (no collective call)."""
+    def lamina_strains(self) -> np.ndarray:
+        """(E11, E22, E12) of the assumed membrane strains at the 3 x 3 points of every
+        owned cell, (cells, 9, 3), at the current state (no collective call); points in the
+        kernels' order (r fastest)."""
         form = self.energy["membrane"]
         coefs = _cpp.fem.pack_coefficients(form)[(_cpp.fem.IntegralType.cell, -1)]
-        const = _cpp.fem.pack_constants(form)
         n_cells = self._mesh.topology.index_map(2).size_local
         coefs = np.ascontiguousarray(coefs[:n_cells])
-        return _yarn_strains(self._coords(n_cells), coefs, const, self._tabs)
+        frames = self._frames[:n_cells]
+        return _lamina_strains(self._coords(n_cells), coefs, frames, self._tabs)
+
+    def yarn_strains(self) -> np.ndarray:
+        """(E11, E22) of :meth:`lamina_strains`, (cells, 9, 2)."""
+        return self.lamina_strains()[:, :, :2]
+
+    def history_strains(self, components: int) -> np.ndarray:
+        """The first ``components`` of :meth:`lamina_strains` in the point order of the
+        histories (the Quadrature functions of the rule of degree 4: point (r_i, s_j) is
+        3 i + j), (owned cells, 9, components)."""
+        e = self.lamina_strains()[:, :, :components]
+        return np.ascontiguousarray(e.reshape(-1, 3, 3, components).transpose(0, 2, 1, 3)).reshape(
+            -1, 9, components
+        )

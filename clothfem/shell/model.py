@@ -63,6 +63,9 @@ __all__ = ["ShellModel", "Quadrature", "SCHEMES"]
 
 #: The ways to integrate membrane and shear (:class:`Quadrature` ``scheme``).
 SCHEMES = ("psri", "sri", "mitc9")
+#: The quadrature degree whose Gauss points (3 x 3 on quadrilaterals) the MITC9 kernels
+#: integrate at; the material histories of a MITC9 model live at its points.
+MITC_DEGREE = 4
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -368,8 +371,8 @@ class ShellModel:
         self.dx_full, self.dx_reduced = dx_f, dx_r
         self._mitc = None
         if quadrature.scheme == "mitc9":
-            self._build_mitc(quadrature)
-            self.alpha = self.friction = self.viscosity = None
+            self.alpha = None
+            self._build_mitc(eps)
             self._energy_terms = {"bending": bending_energy(kappa, self.Q, self.t) * dx_f}
             self._build_load_forms(frame)
             return
@@ -405,18 +408,51 @@ class ShellModel:
         }
         self._build_load_forms(frame)
 
-    def _build_mitc(self, quadrature: Quadrature) -> None:
-        """The MITC9 membrane and shear kernels (linear material, 9-node cells only)."""
+    def _build_mitc(self, eps) -> None:
+        """The MITC9 membrane and shear kernels (9-node cells only), with the material's
+        decrimping, yarn friction and viscosity; the histories at the kernels' 3 x 3 points
+        (the rule of degree 4) follow the assumed strains (``eps``, the UFL strains, only
+        name the history's components)."""
         from .mitc import MitcForms
 
-        mat = self.material
-        if isinstance(mat, DecrimpingFabric) or mat.friction is not None or mat.viscosity:
-            raise ValueError(
-                "element scheme 'mitc9' takes the linear FabricMaterial only (no decrimping, "
-                "yarn friction or viscosity)"
+        mat, mesh = self.material, self.mesh
+        dx_m = ufl.dx(domain=mesh, metadata={"quadrature_degree": MITC_DEGREE})
+        yarn = None
+        if isinstance(mat, DecrimpingFabric):
+            self.yarn = yarn = fem.Constant(mesh, mat.yarn_parameters())
+        self.friction = self.viscosity = None
+        if mat.friction is not None:
+            self.friction = YarnFriction(
+                mesh,
+                mat.friction,
+                eps,
+                self.t,
+                degree=MITC_DEGREE,
+                dx=dx_m,
+                point_strains=lambda: self._mitc.history_strains(2),
+            )
+        if mat.viscosity is not None:
+            self.viscosity = MembraneViscosity(
+                mesh,
+                mat.viscosity,
+                eps,
+                self.t,
+                degree=MITC_DEGREE,
+                dx=dx_m,
+                point_strains=lambda: self._mitc.history_strains(3),
             )
         self._mitc = MitcForms(
-            self.V, u=self.u, d=self.d, D=self.D, Q=self.Q, kG=self.kG, t=self.t, warp=self.warp
+            self.V,
+            u=self.u,
+            d=self.d,
+            D=self.D,
+            Q=self.Q,
+            kG=self.kG,
+            t=self.t,
+            warp=self.warp,
+            yarn=yarn,
+            friction=self.friction,
+            viscosity=self.viscosity,
         )
 
     def _build_load_forms(self, frame) -> None:

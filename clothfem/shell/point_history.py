@@ -9,6 +9,8 @@ that names its arrays in checkpoints.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import dolfinx
 import numpy as np
 import ufl
@@ -37,10 +39,14 @@ class PointHistory:
         t: fem.Constant,
         dx: ufl.Measure,
         names: tuple[str, str],
+        point_strains: Callable[[], np.ndarray] | None = None,
     ) -> None:
         """The Quadrature functions ``history`` (``dim`` values a point) and ``dissipation``
         named ``names`` at the points of the rule of ``degree``, the expression of
-        ``strains`` at those points and the form of t D dx."""
+        ``strains`` at those points and the form of t D dx. ``point_strains``, if given,
+        gives the strains instead (the assumed strains of the MITC9 kernels): (owned cells,
+        points, components) in the rule's point order; the history of ghost cells then
+        stays as it is (assembly and the dissipated energy read owned cells only)."""
         from ffcx.element_interface import create_quadrature
 
         cell = mesh.ufl_cell()
@@ -50,19 +56,23 @@ class PointHistory:
         self.history = fem.Function(fem.FunctionSpace(mesh, He), name=names[0])
         self.dissipation = fem.Function(fem.FunctionSpace(mesh, De), name=names[1])
         points, _ = create_quadrature(cell.cellname(), degree, "default")
-        self._strain = fem.Expression(strains, points)
+        self._source = point_strains
+        self._strain = fem.Expression(strains, points) if point_strains is None else None
         self._nq = len(points)
         self._dissipated_form = fem.form(t * self.dissipation * dx)
 
     def _point_strains(self) -> tuple[np.ndarray, np.ndarray]:
-        """The strains at the points of every local cell (owned and ghost), shape (cells,
-        points, components), and the dofs of those points in ``history`` / ``dissipation``
-        (cells, points); no collective call."""
+        """The strains at the points of every local cell (owned and ghost; owned only from
+        ``point_strains``), shape (cells, points, components), and the dofs of those points
+        in ``history`` / ``dissipation`` (cells, points); no collective call."""
         imap = self.mesh.topology.index_map(2)
         n_cells = imap.size_local + imap.num_ghosts
+        dofs = self.dissipation.function_space.dofmap.list.array.reshape(-1, self._nq)
+        if self._source is not None:
+            e = self._source()
+            return e, dofs[: e.shape[0]]
         e = self._strain.eval(np.arange(n_cells, dtype=np.int32)).reshape(n_cells, self._nq, -1)
-        dofs = self.dissipation.function_space.dofmap.list.array.reshape(n_cells, self._nq)
-        return e, dofs
+        return e, dofs[:n_cells]
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         """The history and the cumulated dissipation (local arrays, for a checkpoint)."""

@@ -31,6 +31,7 @@ runner applies it: ``explicit_step_factor``).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import dolfinx
@@ -103,6 +104,7 @@ class MembraneViscosity(PointHistory):
         *,
         degree: int,
         dx: ufl.Measure,
+        point_strains: Callable[[], np.ndarray] | None = None,
     ) -> None:
         self.viscosity = viscosity
         self.inv_h = fem.Constant(mesh, 0.0)
@@ -115,6 +117,7 @@ class MembraneViscosity(PointHistory):
             strains=strain,
             t=t,
             dx=dx,
+            point_strains=point_strains,
             names=("membrane_strain", "viscous_dissipation"),
         )
         H = self.history

@@ -15,8 +15,10 @@ from test_shell_model import _free_surface
 
 from clothfem import mesh as meshes
 from clothfem.shell import (
+    DahlFriction,
     DecrimpingFabric,
     FabricMaterial,
+    FabricViscosity,
     Gravity,
     Prescribed,
     Quadrature,
@@ -207,32 +209,17 @@ def test_mitc9_membrane_patch_test():
     assert min(orders) > 1.8 and errs[-1] < 1e-6, (errs, orders)
 
 
-def test_mitc9_refuses_what_it_does_not_support(panel):
-    """One-line errors: a nonlinear material, and meshes that are not 9-node quadrilaterals."""
-    dec = DecrimpingFabric(
-        E1=1.2e6, E2=1.2e6, G12=0.1e6, nu12=0.0, rho=436.0, E1_decrimped=50e6,
-        E2_decrimped=20e6, transition1=0.02, transition2=0.03, width1=0.015, width2=0.02,
-    )  # fmt: skip
-    with pytest.raises(ValueError, match="mitc9.*linear FabricMaterial"):
-        ShellModel(panel, material=dec, thickness=1e-3, quadrature=MITC9)
+def test_mitc9_refuses_what_it_does_not_support():
+    """One-line errors: meshes that are not 9-node quadrilaterals."""
     tri = meshes.strip(COMM, length=1.0, width=1.0, nx=2, ny=2, cell="triangle")
     with pytest.raises(ValueError, match="9-node quadrilaterals"):
         ShellModel(tri, material=MAT, thickness=1e-3, quadrature=MITC9)
 
 
-@pytest.mark.parametrize(
-    "overrides",
-    [
-        ["mesh.order=1"],
-        ["mesh.cell=triangle"],
-        [f"material.viscosity{k}=1" for k in ("1", "2", "12")],
-        ["material.preset=crimped-cotton-hysteretic"],
-        ["material.preset=decrimping-cotton"],
-    ],
-)
+@pytest.mark.parametrize("overrides", [["mesh.order=1"], ["mesh.cell=triangle"]])
 def test_scene_refuses_mitc9_where_it_does_not_apply(overrides):
-    """A scene asking for element.scheme = 'mitc9' with a mesh or material its kernels do
-    not implement fails at validation with one line naming the key."""
+    """A scene asking for element.scheme = 'mitc9' with a mesh its kernels do not implement
+    fails at validation with one line naming the key; every material law is accepted."""
     from pathlib import Path
 
     from clothfem import scene as scenes
@@ -241,3 +228,86 @@ def test_scene_refuses_mitc9_where_it_does_not_apply(overrides):
     with pytest.raises(scenes.SceneError, match="scene key 'element.scheme': 'mitc9'"):
         scenes.load(path, ["element.scheme=mitc9", *overrides])
     assert scenes.load(path, ["element.scheme=mitc9"])["element"]["scheme"] == "mitc9"
+    for law in (
+        ["material.preset=decrimping-cotton-hysteretic"],
+        [f"material.viscosity{k}=1" for k in ("1", "2", "12")],
+    ):
+        assert scenes.load(path, ["element.scheme=mitc9", *law])["element"]["scheme"] == "mitc9"
+
+
+# a material with every term the kernels add to the linear law: decrimping (transitions
+# within the strains of the random states below), yarn friction and viscosity
+LAWS = DecrimpingFabric(
+    E1=1.2e6, E2=0.8e6, G12=0.1e6, nu12=0.2, rho=436.0, E1_decrimped=50e6,
+    E2_decrimped=20e6, transition1=0.02, transition2=0.03, width1=0.015, width2=0.02,
+    friction=DahlFriction(stiffness1=1.2e6, stiffness2=0.8e6, stress1=3e4, stress2=2e4),
+    viscosity=FabricViscosity(eta1=30.0, eta2=20.0, eta12=10.0),
+)  # fmt: skip
+
+
+def _with_history(model, x, seed: int) -> None:
+    """Histories 0.01 away from the strains at ``x`` (both signs, so both Dahl branches are
+    taken away from their kink), friction stresses within the sliding stress, a step of
+    1 ms for the viscous rate."""
+    rng = np.random.default_rng(seed + COMM.rank)
+    model.set_state(x)
+    model.set_time_step(1e-3)
+    model.commit_material()
+    for h, dim in ((model.friction.history, 4), (model.viscosity.history, 3)):
+        a = h.x.array.reshape(-1, dim)
+        a[:, :2] += 0.01 * rng.choice([-1.0, 1.0], size=(len(a), 2))
+    s = model.friction.history.x.array.reshape(-1, 4)[:, 2:]
+    s[:] = rng.uniform(-1.5e4, 1.5e4, s.shape)
+
+
+def test_full_tying_with_the_material_terms_equals_the_ufl_model(panel):
+    """Decrimping, yarn friction and viscosity in the kernels: with the "full" tying the
+    MITC9 model equals the UFL model integrated at the same 3 x 3 points everywhere
+    (membrane, shear and the histories), in residual, Jacobian and energy at a large random
+    state with nonzero histories, to round-off; one commit then moves both models'
+    histories alike (the kernels' points in the histories' order) and dissipates the same
+    energy."""
+    ufl_model = ShellModel(
+        panel, material=LAWS, thickness=0.01, quadrature=Quadrature(reduced=4, scheme="sri")
+    )
+    m = ShellModel(panel, material=LAWS, thickness=0.01, quadrature=MITC9)
+    m._mitc = MitcForms(
+        m.V, u=m.u, d=m.d, D=m.D, Q=m.Q, kG=m.kG, t=m.t, warp=m.warp, tying="full",
+        yarn=m.yarn, friction=m.friction, viscosity=m.viscosity,
+    )  # fmt: skip
+    x0 = random_state(ufl_model, 0.02, 7)
+    _with_history(ufl_model, x0, 8)
+    for h in ("friction", "viscosity"):
+        for f in ("history", "dissipation"):
+            getattr(getattr(m, h), f).x.array[:] = getattr(getattr(ufl_model, h), f).x.array
+    m.set_time_step(1e-3)
+    x = random_state(ufl_model, 0.05, 9)
+    ra, rb = x.duplicate(), x.duplicate()
+    ufl_model.residual(x, ra)
+    m.residual(x, rb)
+    assert (ra - rb).norm() < 1e-12 * ra.norm()
+    Ka, Kb = ufl_model.jacobian(x), m.jacobian(x)
+    Kb.axpy(-1.0, Ka)
+    assert Kb.norm(PETSc.NormType.INFINITY) < 1e-12 * Ka.norm(PETSc.NormType.INFINITY)
+    assert math.isclose(m.strain_energy(), ufl_model.strain_energy(), rel_tol=1e-12)
+    for model in (ufl_model, m):
+        model.set_state(x)
+        model.commit_material()
+    for h in ("friction", "viscosity"):  # the owned points (ghost cells' are never read)
+        f = getattr(m, h).history
+        owned = f.function_space.dofmap.index_map.size_local * f.function_space.dofmap.bs
+        a, b = (getattr(mm, h).history.x.array[:owned] for mm in (ufl_model, m))
+        assert np.abs(a - b).max(initial=0.0) < 1e-12 * np.abs(a).max(initial=1.0)
+    diss = ufl_model.dissipated_material()
+    assert diss > 0 and math.isclose(m.dissipated_material(), diss, rel_tol=1e-12)
+
+
+def test_mitc9_taylor_with_the_material_terms(panel):
+    """Residual = energy gradient and Jacobian = residual derivative at second order with
+    decrimping, yarn friction and viscosity in the MITC9 kernels (histories as above)."""
+    model = ShellModel(panel, material=LAWS, thickness=0.01, quadrature=MITC9)
+    _with_history(model, random_state(model, 0.02, 3), 4)
+    x, dx = random_state(model, 0.05, 5), random_state(model, 0.05, 6)
+    steps = (1e-3, 5e-4, 2.5e-4)
+    assert min(energy_orders(model, x, dx, steps, model.strain_energy)) > 1.9
+    assert min(jacobian_orders(model, x, dx, steps)) > 1.9

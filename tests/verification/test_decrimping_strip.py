@@ -14,7 +14,7 @@ import pytest
 from mpi4py import MPI
 
 from clothfem import mesh as meshes
-from clothfem.shell import DecrimpingFabric, PointPin, Prescribed, ShellModel
+from clothfem.shell import DecrimpingFabric, PointPin, Prescribed, Quadrature, ShellModel
 from clothfem.static import LoadStepping, solve_static
 
 COMM = MPI.COMM_WORLD
@@ -38,11 +38,14 @@ def _stretch(green):
     return np.sqrt(1.0 + 2.0 * np.asarray(green))
 
 
-def test_uniaxial_strip_follows_closed_form():
+@pytest.mark.parametrize("scheme", ["psri", "mitc9"])
+def test_uniaxial_strip_follows_closed_form(scheme):
     """Cotton (E 1.2 -> 350 MPa, crimped below 1 MPa, de-crimped above 10 MPa) with nu12 =
     0.2: the tip force at yarn strains in the crimped range, through the transition and in
     the de-crimped range against the closed form (relative 1e-6), and the lateral strain
-    -nu12 E11 of uniaxial stress."""
+    -nu12 E11 of uniaxial stress.
+    Both the partial selective element and MITC9 (the assumed strains of a homogeneous
+    strain are exact on rectangular cells)."""
     mat = dataclasses.replace(DecrimpingFabric.cotton(), nu12=0.2)
     L, b = 1.0, 0.2
     et, w = mat.transition1, mat.width1
@@ -55,6 +58,7 @@ def test_uniaxial_strip_follows_closed_form():
         sm,
         material=mat,
         thickness=T,
+        quadrature=Quadrature(scheme=scheme),
         supports=[
             Prescribed("root", displacement=(0.0, 0.0, 0.0), components=(0, 2)),
             Prescribed("tip", displacement=(d_max, 0.0, 0.0), components=(0, 2)),
@@ -89,11 +93,14 @@ def test_uniaxial_strip_follows_closed_form():
     assert want[0] / (T * b * _stretch(0.4) * 0.4) == pytest.approx(mat.E1, rel=1e-9)
 
 
-def test_biaxial_patch_follows_closed_form():
+@pytest.mark.parametrize("scheme", ["psri", "mitc9"])
+def test_biaxial_patch_follows_closed_form(scheme):
     """An orthotropic law (different moduli and transitions in warp and weft, nu12 = 0.3) on
     a square patch with both yarn strains prescribed (E11 to 0.2, E22 to 0.25): the warp and
     weft edge forces at several steps against the closed form S(E11, E22) (relative 1e-6),
-    crossing the warp transition (0.07..0.13) and the weft one (0.1..0.2)."""
+    crossing the warp transition (0.07..0.13) and the weft one (0.1..0.2).
+    Both the partial selective element and MITC9 (the assumed strains of a homogeneous
+    strain are exact on rectangular cells)."""
     mat = DecrimpingFabric(
         E1=1.2e6,
         E2=0.8e6,
@@ -125,6 +132,7 @@ def test_biaxial_patch_follows_closed_form():
         sm,
         material=mat,
         thickness=T,
+        quadrature=Quadrature(scheme=scheme),
         supports=[
             Prescribed("root", displacement=ux, components=(0, 2)),
             Prescribed("tip", displacement=ux, components=(0, 2)),

@@ -86,7 +86,7 @@ def test_rollup_curve_against_the_exact_arc():
     assert abs(w_model / w_circle - 1) < 2.5e-3
     curves = [_errors(V.run_rollup_curve(nx=n)) for n in (10, 20, 40)]
     assert max(curves[-1]) < 5e-4, curves
-    for coarse, fine in zip(curves, curves[1:]):
+    for coarse, fine in zip(curves, curves[1:], strict=False):
         assert all(f < c for f, c in zip(fine, coarse, strict=True)), curves
 
 
