@@ -86,7 +86,7 @@ class Quadrature:
     ``scheme = "mitc9"``: assumed covariant membrane and transverse-shear strains from the
     tying points of MITC9 (Bucalem & Bathe 1993), integrated with the full rule; no
     spurious modes and no locking without a weight (:mod:`clothfem.shell.mitc`: hand-written
-    kernels; 9-node quadrilaterals and the linear :class:`FabricMaterial` only).
+    kernels, with every material law; 9-node quadrilaterals only).
 
     ``scheme = "sri"``: selective reduced integration (Hughes 1987) with a constant blend
     ``stabilization`` of the fully integrated membrane energy (0: plain SRI, which leaves a
