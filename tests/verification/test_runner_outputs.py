@@ -325,8 +325,11 @@ def test_resume_bit_for_bit_from_two_checkpoints(tmp_path, sets, picks):
 @pytest.mark.slow
 def test_resume_bit_for_bit_with_self_contact(tmp_path):
     """The arm-sleeve scene (16x20) with fabric self-contact to 50 deg, resumed from the
-    checkpoint at 45.6 deg (row 100) where some 50-75 fabric-fabric pairs are in contact:
-    the resumed run builds a fresh candidate list and repeats the history (but the timers)."""
+    checkpoint at 45.6 deg (row 100), from where fabric-fabric pairs are in contact at every
+    row: the resumed run builds a fresh candidate list and repeats the history (but the
+    timers). How many pairs touch past the slip moves with round-off (the fewest in a row
+    was 16 in one process and above 20 in another, with the same code), so the scenario
+    check asks for at least 10."""
     base = _shared(tmp_path)
     sets = ["contact.self_contact=true", "body.1.angle_max=50", "mesh.n_around=16"]
     sets += ["mesh.n_along=20", "output.png=false", "output.checkpoint_every=20"]
@@ -334,8 +337,8 @@ def test_resume_bit_for_bit_with_self_contact(tmp_path):
     kept = _run_keeping_checkpoints(scene, base / "reference", (5,))
     _resume_from(base / "reference", kept[5], base / "resumed", scene)
     reference = _rows(base / "reference")
-    assert min(int(r["self_pairs"]) for r in reference[100:]) > 20
     _same_history(reference, _rows(base / "resumed"))
+    assert min(int(r["self_pairs"]) for r in reference[100:]) >= 10
 
 
 def test_resume_keeps_the_torque_table(tmp_path):
