@@ -174,6 +174,20 @@ def test_tube_around_a_growing_ellipsoid_ends_outside_it():
     assert np.linalg.norm(res.x[mid, 1:], axis=1).min() >= 0.075 + relax.offset - 1e-9
 
 
+def test_push_out_moves_only_the_points_inside_to_the_offset():
+    """Points a little inside one of two overlapping spheres end ``offset`` outside the union
+    along the normal, exactly; a point outside does not move, and its move is 0."""
+    a = Ellipsoid(centre=np.zeros(3), axes=np.eye(3), radii=[0.1, 0.1, 0.1], name="a")
+    b = Ellipsoid(centre=np.array([0.15, 0, 0]), axes=np.eye(3), radii=[0.1] * 3, name="b")
+    x = np.array([[0.0, -0.099, 0.0], [0.16, 0.0, 0.095], [0.0, 0.0, 0.2]])
+    new, moved = dn.push_out(x=x, ellipsoids=[a, b], offset=5e-4)
+    gap, _ = dn.body_gaps(x=new, ellipsoids=[a, b])
+    assert np.allclose(gap[:2], 5e-4, rtol=0, atol=1e-12)
+    assert np.allclose(new[0], [0.0, -0.1005, 0.0], atol=1e-12)
+    assert moved[0] == pytest.approx(0.0015)
+    assert np.array_equal(new[2], x[2]) and moved[2] == 0.0
+
+
 def test_donning_a_tube_that_already_fits_leaves_it_unchanged():
     net, fab = _tube(radius=0.06)
     R, t = _rotation([0.3, 1.0, 0.2], 0.9), np.array([0.1, -0.4, 0.7])
