@@ -420,27 +420,16 @@ class ShellModel:
         yarn = None
         if isinstance(mat, DecrimpingFabric):
             self.yarn = yarn = fem.Constant(mesh, mat.yarn_parameters())
-        self.friction = self.viscosity = None
-        if mat.friction is not None:
-            self.friction = YarnFriction(
-                mesh,
-                mat.friction,
-                eps,
-                self.t,
-                degree=MITC_DEGREE,
-                dx=dx_m,
-                point_strains=lambda: self._mitc.history_strains(2),
-            )
-        if mat.viscosity is not None:
-            self.viscosity = MembraneViscosity(
-                mesh,
-                mat.viscosity,
-                eps,
-                self.t,
-                degree=MITC_DEGREE,
-                dx=dx_m,
-                point_strains=lambda: self._mitc.history_strains(3),
-            )
+        histories = {}  # yarn friction follows (E11, E22), viscosity (E11, E22, E12)
+        for name, cls, term, comps in (
+            ("friction", YarnFriction, mat.friction, 2),
+            ("viscosity", MembraneViscosity, mat.viscosity, 3),
+        ):
+            histories[name] = None if term is None else cls(
+                mesh, term, eps, self.t, degree=MITC_DEGREE, dx=dx_m,
+                point_strains=lambda k=comps: self._mitc.history_strains(k),
+            )  # fmt: skip
+        self.friction, self.viscosity = histories["friction"], histories["viscosity"]
         self._mitc = MitcForms(
             self.V,
             u=self.u,
