@@ -473,8 +473,11 @@ def _cell(out, coef, const, coords, mode, tabs):
             for i in range(3):
                 for k in range(3):
                     S[i] += scale * A[k, i] * sig[k]
+            if mode >= K_UU:  # the tangent only for the Jacobian blocks
+                for i in range(3):
                     for j in range(3):
-                        D[i, j] += scale * A[k, i] * tan[k] * A[k, j]
+                        for k in range(3):
+                            D[i, j] += scale * A[k, i] * tan[k] * A[k, j]
         for c in range(5):
             Pc = Ps[sets[c]]
             for i in range(Pc.shape[1]):
