@@ -378,6 +378,7 @@ def build_model(
         f"(order {scene['mesh']['order']}, u and theta of degree {scene['element']['degree']}), "
         f"{n_nodes} nodes, {5 * n_nodes} unknowns (u: 3, theta: 2 per node), {comm.size} rank(s)",
         f"material: {_material_line(mat)}",
+        f"element: {_element_line(scene['element'])}",
         "supports: "
         + (", ".join(f"{s['type']} on {s['where']}" for s in scene["supports"]) or "none"),
         "loads: " + (", ".join(ld["type"] for ld in scene["loads"]) or "none"),
@@ -394,6 +395,18 @@ def build_model(
     else:
         log += ["contact: not built (no body in the scene)", "friction: not built (no contact)"]
     return model, log
+
+
+def _element_line(el: dict[str, Any]) -> str:
+    """How the scene's membrane and shear are integrated, for the build log."""
+    if el["scheme"] == "mitc9":
+        return "MITC9 (assumed membrane and shear strains, 3 x 3 points; docs/shell_element.md)"
+    if el["scheme"] == "psri":
+        return (
+            f"partial selective reduced integration (alpha = min(1, {el['psri_factor']:g} "
+            "t^2/h^2) of membrane and shear fully integrated; docs/shell_element.md)"
+        )
+    return f"selective reduced integration (stabilization {el['stabilization']:g}; for comparison)"
 
 
 def _inertia_log(sv: dict[str, Any]) -> str:

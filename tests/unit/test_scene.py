@@ -165,6 +165,7 @@ def test_scene_run_matches_elastica(tmp_path):
 
     model, log = build_model(scenes.load(scene), COMM)
     assert any("contact: not built" in line for line in log)
+    assert any(line.startswith("element: partial selective") for line in log)  # the default
     from clothfem.static import LoadStepping, solve_static
 
     solve_static(model, stepping=LoadStepping(initial_increment=0.5, max_increment=0.5))
