@@ -612,6 +612,8 @@ class MitcForms:
         dofs = W.dofmap.list.array.reshape(-1)[:n_cells]
         self.stiffness.x.array.reshape(-1, 81)[dofs] = _cell_stiffness(coords, const, self._tabs)
         self._frames = _cell_frames(coords, const, self._tabs)  # local cells, owned first
+        n_owned = mesh.topology.index_map(2).size_local
+        self._owned_coords = np.ascontiguousarray(coords[:n_owned])  # for lamina_strains
         coefficients = [u, d, D, self.stiffness]
         law, layout = self._law_constants(mesh, yarn, friction, viscosity)
         if layout.value[0]:  # the point frames, for the material terms
@@ -677,10 +679,9 @@ class MitcForms:
         kernels' order (r fastest)."""
         form = self.energy["membrane"]
         coefs = _cpp.fem.pack_coefficients(form)[(_cpp.fem.IntegralType.cell, -1)]
-        n_cells = self._mesh.topology.index_map(2).size_local
+        n_cells = len(self._owned_coords)
         coefs = np.ascontiguousarray(coefs[:n_cells])
-        frames = self._frames[:n_cells]
-        return _lamina_strains(self._coords(n_cells), coefs, frames, self._tabs)
+        return _lamina_strains(self._owned_coords, coefs, self._frames[:n_cells], self._tabs)
 
     def yarn_strains(self) -> np.ndarray:
         """(E11, E22) of :meth:`lamina_strains`, (cells, 9, 2)."""
