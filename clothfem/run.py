@@ -52,6 +52,7 @@ from .shell import (
     ShellModel,
     Symmetry,
 )
+from .simulation import run_dynamic
 from .static import LoadStepping, solve_static
 from .torque_measure import torque_segment_index
 from .torque_table import FILE as TORQUE_FILE
@@ -524,16 +525,16 @@ def run_scene(
         summary: dict[str, Any] = {"scene": scene["scene"]["name"], "completed": False}
         summary["built"] = log  # what the run built and left out (e.g. a repeated gait cycle)
         try:
-            run_contact_scene(
-                scene,
-                out,
-                model=model,
-                comm=comm,
-                t0=t0,
-                check_stop=check_stop,
-                resume=resume,
-                summary=summary,
-            )
+            if s["integrator"] == "static":
+                run_contact_scene(
+                    scene, out, model=model, comm=comm, t0=t0, check_stop=check_stop,
+                    summary=summary,
+                )  # fmt: skip
+            else:
+                run_dynamic(
+                    scene, out, model=model, comm=comm, t0=t0, check_stop=check_stop,
+                    resume=resume, summary=summary,
+                )  # fmt: skip
             summary["completed"] = True
         except BaseException as exc:
             summary["reason"] = f"{type(exc).__name__}: {exc}"

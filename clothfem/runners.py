@@ -1,19 +1,18 @@
-"""The scene runners with a body (quasi-static, Newmark, explicit): fabric-body contact driven
-by segment motions.
+"""The quasi-static runner with a body, and what every runner derives from a scene's body.
 
-Used by :func:`clothfem.run.run_scene` when a scene has ``[[body]]`` segments (the arm-sleeve
-elbow-flexion scene of Man & Swan 2007, Sec. 4.1, is ``demos/scenes/arm_sleeve.toml``).
+:func:`run_contact_scene` runs ``solver.integrator = "static"`` with ``[[body]]`` segments;
+the dynamic integrators run through :func:`clothfem.simulation.run_dynamic`, which uses the
+helpers here (segment motions, the Eq. 28 plan, body poses at t, snapshots, checkpoints).
 
-Stages
-------
+Stages of the quasi-static run
+------------------------------
 1. **Settling** (``contact.settle``): the loads (gravity) are ramped from 0 to full in
    ``solver.steps`` equal steps with the body at rest, quasi-statically with contact
    (:meth:`LagrangeContact.advance`, automatic cut-back), so the sleeve comes to rest on the arm.
 2. **Motion**: the hinge segments are turned to their ``angle_max`` in ``contact.increments``
    equal angle increments (each one solved by ``advance``: sub-steps with cut-back). Every
-   increment is an equilibrium state with contact and friction history: **quasi-static**, no
-   inertia (the dynamics module is not coupled to contact yet), so ``omega`` only maps the
-   angle to a time column.
+   increment is an equilibrium state with contact and friction history: no inertia, so
+   ``omega`` only maps the angle to a time column.
 
 After the settled state and after each increment one CSV row is written at once (angle, Eq. 28
 torque about J over the node set AJ, its component along the hinge axis, resultant, active
@@ -29,9 +28,7 @@ tau_seg the torque of the contact forces on that segment about its joint
 increments and of the Newmark steps, one impulse per explicit step);
 ``dissipation_total`` [J] is the contact layers' frictional dissipation and
 ``dissipation_material`` [J] the fabric's (yarn friction, ``material.friction_*``; 0 for an
-elastic fabric).
-The explicit rows also carry ``external_work`` (the work of gravity [J]) for the energy
-balance. :func:`clothfem.run.run_scene` adds the per-phase torque statistics to
+elastic fabric). :func:`clothfem.run.run_scene` adds the per-phase torque statistics to
 ``summary.json`` (:func:`clothfem.report.resistance_measures`).
 """
 
@@ -57,15 +54,11 @@ from .contact.forces import joint_torque
 from .contact.lagrange import ContactDivergence, LagrangeContact, LagrangeContactParameters
 from .history import yarn_strain_columns
 from .io import Progress, ResultWriter, animate_series, rank0_print, snapshot_png
-from .report import joint_power, joint_work, mark_events
+from .report import joint_work, mark_events
 from .scene import SceneError
 from .shell import ShellModel
 from .static import SolverDivergence
 from .torque_measure import TorqueMeasure, torque_measure, torque_segment_index
-from .torque_table import TorqueTable
-from .torque_table import append as append_torques
-from .torque_table import keep_rows as keep_torque_rows
-from .torque_table import plot as plot_torques
 
 __all__ = ["body_motions", "contact_log", "run_contact_scene", "torque_centre"]
 
@@ -547,33 +540,19 @@ def run_contact_scene(
     comm: MPI.Comm,
     t0: float,
     check_stop: Callable[[str], None],
-    resume: bool = False,
     summary: dict[str, Any] | None = None,
 ) -> Path:
     """Settle, then drive the hinges; write ``history.csv``, ``fabric.xdmf`` and PNGs to ``out``.
 
-    ``solver.integrator = "newmark"``: dynamic (:func:`_run_dynamic`); "static": a sequence of
-    equilibria. ``check_stop(where)`` is called after every written row and every converged
-    sub-step (raises to stop the run). ``summary`` (dict) is updated as the run goes (final
-    angle, steps, cut-backs, max penetration). Raises :class:`SolverDivergence` when a step
-    fails below the smallest step (rows written so far are kept).
+    The quasi-static path (``solver.integrator = "static"``): a sequence of equilibria (the
+    dynamic integrators run through :func:`clothfem.simulation.run_dynamic`).
+    ``check_stop(where)`` is called after every written row and every converged sub-step
+    (raises to stop the run). ``summary`` (dict) is updated as the run goes (final angle,
+    steps, cut-backs, max penetration). Raises :class:`SolverDivergence` when a step fails
+    below the smallest step (rows written so far are kept).
     """
     summary = summary if summary is not None else {}
     _write_events(scene, out, comm, summary)
-    dynamic = {"explicit": _run_explicit, "newmark": _run_dynamic}.get(
-        scene["solver"]["integrator"]
-    )
-    if dynamic is not None:
-        return dynamic(
-            scene,
-            out,
-            model=model,
-            comm=comm,
-            t0=t0,
-            check_stop=check_stop,
-            resume=resume,
-            summary=summary,
-        )
     c = scene["contact"]
     motions = body_motions(scene)
     bodies = []
@@ -809,7 +788,7 @@ def _end_together(comm: MPI.Comm) -> None:
     comm.barrier()
 
 
-def _checkpoint(out: Path, comm: MPI.Comm, data: dict[str, Any]) -> None:
+def save_checkpoint(out: Path, comm: MPI.Comm, data: dict[str, Any]) -> None:
     """Write this rank's restart file atomically (``out/checkpoint/rank<r>-of-<n>.npz``)."""
     folder = out / "checkpoint"
     if comm.rank == 0:
@@ -823,7 +802,7 @@ def _checkpoint(out: Path, comm: MPI.Comm, data: dict[str, Any]) -> None:
     comm.barrier()
 
 
-def _load_checkpoint(out: Path, comm: MPI.Comm) -> dict[str, np.ndarray]:
+def load_checkpoint(out: Path, comm: MPI.Comm) -> dict[str, np.ndarray]:
     path = out / "checkpoint" / f"rank{comm.rank}-of-{comm.size}.npz"
     ok = comm.allreduce(path.exists(), op=MPI.LAND)
     if not ok:
@@ -931,594 +910,23 @@ def _snapshot(
 
 
 def _progress_snapshots(
-    plan: _Plan, state: dict, stage: str, angle: float, snap, *, t: float = 0.0
-) -> None:
+    plan: _Plan, taken: int, stage: str, angle: float, snap, *, t: float = 0.0
+) -> int:
     """``snap("settled")`` when the motion starts, then ``snap(<angle>deg)`` at each quarter of
     the hinge motion (without a hinge: ``snap(t<time>s)`` at each quarter of the time after
-    the settling); ``state["snap"]`` counts the snapshots taken (checkpointed)."""
-    if stage == "motion" and state["snap"] == 0:
-        state["snap"] = 1
+    the settling); ``taken``: the snapshots taken so far (checkpointed); returns the new
+    count."""
+    if stage == "motion" and taken == 0:
+        taken = 1
         snap("settled")
     if not plan.hinged:
         span = plan.t_end - plan.t_settle
-        while 1 <= state["snap"] <= 3 and t >= plan.t_settle + span * state["snap"] / 4 - 1e-12:
-            snap(f"t{plan.t_settle + span * state['snap'] / 4:.3f}s")
-            state["snap"] += 1
-        return
+        while 1 <= taken <= 3 and t >= plan.t_settle + span * taken / 4 - 1e-12:
+            snap(f"t{plan.t_settle + span * taken / 4:.3f}s")
+            taken += 1
+        return taken
     quarters = plan.quarters()
-    while state["snap"] <= 3 and angle >= quarters[state["snap"] - 1] - 1e-9:
-        snap(f"{quarters[state['snap'] - 1]:04.1f}deg")
-        state["snap"] += 1
-
-
-def _run_dynamic(
-    scene: dict[str, Any],
-    out: Path,
-    *,
-    model: ShellModel,
-    comm: MPI.Comm,
-    t0: float,
-    check_stop: Callable[[str], None],
-    resume: bool,
-    summary: dict[str, Any],
-) -> Path:
-    """The paper's approach (Sec. 3.1.3): implicit Newmark with Lagrange-multiplier contact
-    (:class:`clothfem.contact.dynamic.DynamicContact`). The loads ramp up over
-    ``solver.ramp_time`` with the body at rest until ``solver.settle_time`` (dynamic
-    settling); then the hinge segments move at their angular velocity. One CSV row per
-    accepted step; fields every ``output.every`` steps; a restart checkpoint every
-    ``output.checkpoint_every`` steps (``clothfem run --resume`` continues from it)."""
-    from .contact.dynamic import DynamicContact
-    from .dynamics import ShellSystem
-
-    c, sv, o = scene["contact"], scene["solver"], scene["output"]
-    motions = body_motions(scene)
-    t_settle, t_ramp = sv["settle_time"], sv["ramp_time"]
-    bodies_at = _bodies_at(scene, motions)
-
-    gamma = sv["gamma"]
-    dc = DynamicContact(
-        ShellSystem(model, rotary_scale=sv["rotary_scale"]),
-        bodies_at,
-        params=LagrangeContactParameters(
-            mu=c["mu"],
-            tangential_penalty=c["tangential_penalty"],
-            semismooth_passes=c["semismooth_passes"],
-            newton_stall_limit=c["newton_stall_limit"],
-        ),
-        beta=(gamma + 0.5) ** 2 / 4,
-        gamma=gamma,
-    )
-    contact = dc.contact
-    plan = _plan(scene, motions)
-    hinge_axis, t_end, angle_at = plan.hinge_axis, plan.t_end, plan.angle_at
-    name = scene["scene"]["name"]
-    measure = plan.measure
-
-    def torque_at(t: float) -> tuple[np.ndarray, float]:
-        """Eq. 28 torque [N m] and its flexion component at t (collective)."""
-        if measure.mode == "all" or (measure.mode == "beyond_joint" and not measure.moving):
-            tau = contact.torque(measure.centre_at(t), nodes=plan.aj)  # a fixed node set
-            return tau, float(tau @ measure.axis_at(t))
-        nodes, body, f_pairs, _ = contact.pair_forces()  # per (node, ellipsoid) pair
-        x = contact.X[nodes] + model.u.x.array[: 3 * contact.n].reshape(-1, 3)[nodes]
-        tau, flex = measure.local(t=t, x=x, force_on_body=-f_pairs, body=body)
-        sums = comm.allreduce(np.append(tau, flex), op=MPI.SUM)
-        return sums[:3], float(sums[3])
-
-    pressure = fem.Function(contact.S, name="contact_pressure")  # Pa, nodal (lam / area)
-
-    def update_pressure() -> None:
-        pressure.x.array[: contact.n] = contact.state().pressure  # collective (areas)
-        pressure.x.scatter_forward()
-
-    def snapshot(tag: str) -> None:
-        update_pressure()
-        _snapshot(scene, model, out, comm, tag, contact.bodies, pressure=pressure)
-
-    def fields_now() -> tuple[fem.Function]:
-        update_pressure()
-        return (pressure,)
-
-    state = {"step": 0, "rows": 0, "cut": 0, "pen": 0.0, "newton": 0, "snap": 0}
-    # the measured joint's work [J], hinge angle [rad] and segment torque about the hinge
-    # axis [N m] at the last step
-    state.update(work=0.0, theta=0.0, tau_axis=0.0)
-    hinge_motion = _measured_hinge(motions, plan.k_torque)
-    keep = None
-    if resume:
-        data = _load_checkpoint(out, comm)
-        dc.restore_arrays(data)
-        state.update({k: int(data[f"run_{k}"]) for k in ("step", "rows", "cut", "newton", "snap")})
-        for k in ("work", "theta", "tau_axis"):
-            state[k] = float(data[f"run_{k}"]) if f"run_{k}" in data else 0.0
-        state["pen"] = float(data["run_pen"])
-        keep = state["rows"]
-        rank0_print(f"  resumed from the checkpoint at t = {dc.t:.6g} s (step {state['step']})")
-    model.u.name = "displacement"
-    timers0 = dict(contact.timers)
-    progress = Progress(
-        label=name, comm=comm, start=min(max(dc.t / t_end, 0.0), 1.0) if t_end > 0 else 0.0
-    )
-    resume_after = dc.t if resume else None
-
-    with ResultWriter(out, model, keep_rows=keep, resume_after=resume_after) as writer:
-
-        def on_step(r) -> None:
-            model.commit_material()  # the step is accepted: yarn-friction history to x_n+1
-            state["step"] += 1
-            state["cut"] += r.cutbacks
-            cr = r.contact
-            state["pen"] = max(state["pen"], cr.max_penetration)
-            state["newton"] += cr.newton_iterations
-            if hinge_motion is not None:
-                # the trapezoid rule of report.joint_work over the step's hinge angle (the
-                # segment torque is a state of the implicit step; over time it would miss
-                # half of the first step when the rate jumps at the start)
-                seg = _segment_torque(contact, model, plan.k_torque, hinge_motion.joint, comm)
-                tau_axis = float(seg @ hinge_axis)
-                theta = hinge_motion.angle(max(r.time - t_settle, 0.0))
-                th = np.array([state["theta"], theta])
-                ta = np.array([state["tau_axis"], tau_axis])
-                state["work"] += float(joint_work(th, ta, 1.0)[-1])
-                state.update(theta=theta, tau_axis=tau_axis)
-            tio = time.perf_counter()
-            step = state["step"]
-            if step % o["every"] == 0 or r.time >= t_end * (1 - 1e-12):  # and the last
-                update_pressure()
-                writer.write_fields(r.time, (pressure,))
-            if o["checkpoint_every"] and step % o["checkpoint_every"] == 0:
-                run = {f"run_{k}": np.array(v) for k, v in state.items()}
-                run["run_rows"] = np.array(state["rows"] + 1)  # this step's row included
-                _checkpoint(out, comm, {**dc.state_arrays(), **run})
-            t_io = time.perf_counter() - tio
-            tau, flex = torque_at(r.time)
-            res = contact.resultant()
-            angle = angle_at(r.time)
-            tm = {k: contact.timers[k] - timers0[k] for k in timers0}
-            timers0.update(contact.timers)
-            now = time.perf_counter()
-            row = {
-                "stage": "settle" if r.time <= t_settle + 1e-12 else "motion",
-                "increment": step,
-                "time": r.time,
-                "dt": r.dt,
-                "load_factor": float(model.lam.value),
-                "angle_deg": angle,
-                **_torque_columns(tau, res, flex),
-                "n_active": cr.n_active,
-                "max_penetration": cr.max_penetration,
-                "min_multiplier": cr.min_multiplier,
-                "complementarity": cr.complementarity,
-                "sum_lam": cr.total_normal_force,
-                "n_stick": cr.n_stick,
-                "n_slip": cr.n_slip,
-                "cutbacks": r.cutbacks,
-                "active_set_iterations": cr.active_set_iterations,
-                "newton_iterations": cr.newton_iterations,
-                **yarn_strain_columns(model),
-                "kinetic_energy": r.kinetic_energy,
-                "strain_energy": r.strain_energy,
-                "joint_work": state["work"],
-                "dissipation_total": contact.dissipation_total,
-                "dissipation_material": model.dissipated_material(),
-                "t_assembly": tm["assembly"],
-                "t_contact": tm["contact"],
-                "t_solve": tm["solve"],
-                "t_io": t_io,
-                "wall_time": cr.wall_time,
-                "elapsed": now - t0,
-            }
-            writer.append_row(row)
-            state["rows"] += 1
-            summary.update(
-                final_angle_deg=angle,
-                time=r.time,
-                steps=step,
-                cutbacks=state["cut"],
-                max_penetration=state["pen"],
-                newton_iterations=state["newton"],
-            )
-            frac = min(max(r.time / t_end, 0.0), 1.0) if t_end > 0 else 1.0
-            progress.update(
-                frac,
-                f"t {r.time:7.4f} s  angle {angle:6.2f} deg  |tau| {row['torque_mag']:.4f} N m"
-                f"  step {step}  dt {r.dt:.2e}  cut {r.cutbacks}  active {cr.n_active}  "
-                f"newton {cr.newton_iterations}",
-            )
-            _progress_snapshots(plan, state, row["stage"], angle, snapshot, t=r.time)
-            _stop_with_fields(
-                check_stop,
-                f"step {step} (t = {r.time:.6g} s)",
-                writer,
-                r.time,
-                fields_now,
-            )
-
-        try:
-            dc.run(
-                t_end=t_end,
-                dt=sv["dt"],
-                dt_min=sv["dt_min"],
-                load=(lambda t: min(t / t_ramp, 1.0)) if t_ramp > 0 else (lambda t: 1.0),
-                on_step=on_step,
-            )
-            snapshot("final")
-        except ContactDivergence as exc:
-            snapshot(f"stopped_{angle_at(dc.t):04.1f}deg")
-            raise SolverDivergence(
-                f"dynamic contact stopped at t = {dc.t:.6g} s ({angle_at(dc.t):.2f} deg): {exc}"
-            ) from None
-        finally:
-            progress.close()
-            _end_together(comm)
-            if o["png"] and comm.rank == 0 and writer.csv_path.exists():
-                _torque_plot(writer.csv_path, out / "torque_angle.png", name, _events(summary))
-                _animation(scene, out, lambda t: bodies_at(t)[0])
-    return out
-
-
-@dataclass(frozen=True)
-class _NoContact:
-    """The contact diagnostics of a row without a body."""
-
-    active: int = 0
-    n_stick: int = 0
-    max_penetration: float = 0.0
-    min_gap_after: float = math.inf
-    sum_lambda: float = 0.0
-
-
-_NO_CONTACT = _NoContact()
-
-
-def _self_contact_columns(sc, state: dict, *, frame: bool) -> dict[str, float]:
-    """The self-contact history columns of a row (none without self-contact): the
-    correction's diagnostics since the last row and, at a field frame, the independent
-    intersection count of the written surface (collective). Keeps the run's largest count
-    (``self_max``) and its crossings left after the fail-safe (``self_left``) in ``state``."""
-    if sc is None:
-        return {}
-    rec = sc.collect()
-    row = {
-        "self_pairs": rec.contacts,
-        "self_min_gap": rec.min_gap if math.isfinite(rec.min_gap) else math.nan,
-        "self_crossings": rec.crossings,
-        "self_crossings_left": rec.crossings_left,
-        "self_zone_nodes": rec.zone_nodes,
-        "t_self_contact": rec.wall,
-    }
-    state["self_left"] = state.get("self_left", 0) + rec.crossings_left
-    if frame:
-        t0 = time.perf_counter()
-        row["self_intersections"] = sc.intersections()
-        state["self_max"] = max(state.get("self_max", 0), row["self_intersections"])
-        row["t_self_contact"] += time.perf_counter() - t0
-    return row
-
-
-def _run_explicit(
-    scene: dict[str, Any],
-    out: Path,
-    *,
-    model: ShellModel,
-    comm: MPI.Comm,
-    t0: float,
-    check_stop: Callable[[str], None],
-    resume: bool,
-    summary: dict[str, Any],
-) -> Path:
-    """The paper's explicit approach (Sec. 3.2): central difference with the lumped mass and
-    forward-increment Lagrange multipliers (:class:`clothfem.contact.film.FilmContact`),
-    fixed step ``solver.safety`` x the stable step at t = 0. Loads ramp up and the body rests
-    as in :func:`_run_dynamic`. One CSV row per ``output.interval`` [s]: the torque, resultant
-    and multiplier sum are the means over its steps (the per-step FILM forces are impulses);
-    fields every ``output.every`` rows and at the end; a restart checkpoint (state, velocity,
-    acceleration, step size) every ``output.checkpoint_every`` rows. Without a body (a free
-    drape) no contact is built and the contact columns are 0."""
-    from .contact.film import FilmContact, FilmParameters
-    from .contact.self_contact import SelfContact
-    from .dynamics import (
-        Damping,
-        DynamicsDivergence,
-        ShellSystem,
-        StableStep,
-        integrate_explicit,
-        stable_time_step,
-    )
-    from .shell.viscosity import explicit_step_factor
-
-    c, sv, o = scene["contact"], scene["solver"], scene["output"]
-    motions = body_motions(scene)
-    t_settle, t_ramp = sv["settle_time"], sv["ramp_time"]
-    bodies_at = _bodies_at(scene, motions)
-    system = ShellSystem(model, rotary_scale=sv["rotary_scale"])
-    load = (lambda t: min(t / t_ramp, 1.0)) if t_ramp > 0 else (lambda t: 1.0)
-    state = {"row": 0, "pen": 0.0, "snap": 0, "contact_wall": 0.0, "t_row": time.perf_counter()}
-    start: dict[str, Any] = {"step": 0, "v": None, "a": None, "clock": None, "work": (0.0, 0.0)}
-    keep = None
-    if resume:
-        data = _load_checkpoint(out, comm)
-        model.restore_arrays({k[6:]: data[k] for k in data if k.startswith("model_")})
-        for k in ("v", "a"):
-            vec = system.create_vector()
-            if data[k].shape != vec.getArray().shape:
-                raise SceneError("--resume: the checkpoint does not match this mesh / ranks")
-            vec.getArray()[:] = data[k]
-            start[k] = vec
-        st = StableStep(
-            *(float(data[f"st_{k}"]) for k in ("dt_crit", "omega_max", "dt_bound")),
-            int(data["st_iterations"]),
-            bool(data["st_converged"]),
-        )
-        dt = float(data["dt"])
-        start["step"] = int(data["run_step"])
-        if "run_clock_h" in data:  # the step had shrunk: continue its clock
-            keys = ("t_base", "step_base", "h", "n_end")
-            c0 = [data[f"run_clock_{k}"] for k in keys]
-            start["clock"] = (float(c0[0]), int(c0[1]), float(c0[2]), int(c0[3]))
-        state.update(row=int(data["run_row"]), snap=int(data["run_snap"]))
-        state["pen"] = float(data["run_pen"])
-        state["work"] = float(data["run_work"]) if "run_work" in data else 0.0
-        for k in ("self_max", "self_left"):
-            if f"run_{k}" in data:
-                state[k] = int(data[f"run_{k}"])
-        keep = state["row"]
-        if "run_external_work" in data:  # the integrator's work accumulators
-            start["work"] = (float(data["run_external_work"]), float(data["run_damping_work"]))
-        # the time of the checkpointed row (older checkpoints: keep every field step)
-        start["time"] = float(data["run_time"]) if "run_time" in data else math.inf
-    else:
-        st = stable_time_step(system, lam=load(0.0), iterations=600)
-        dt = sv["safety"] * st.dt_crit
-        visc = model.material.viscosity
-        if visc is not None:  # the damped central difference's smaller stable step
-            mat = model.material
-            factor = explicit_step_factor(
-                omega=st.omega_max, viscosity=visc, E1=mat.E1, E2=mat.E2, G12=mat.G12
-            )
-            dt *= factor
-            rank0_print(f"  explicit: membrane viscosity, step x {factor:.3f}")
-    rank0_print(
-        f"  explicit: dt_crit {st.dt_crit:.4e} s (Lanczos "
-        f"{'converged' if st.converged else 'not converged'} in {st.iterations}), "
-        f"dt {dt:.4e} s"
-    )
-    fc = None
-    if scene["body"]:
-        params = FilmParameters(mu=c["mu"], kernel=c["kernel"])
-        fc = FilmContact(system, bodies_at, params=params)
-    # fabric self-contact (contact.self_contact): FILM, then the self-contact correction
-    sc = SelfContact.from_scene(system, c, film=fc) if scene["body"] else None
-    rank0_print(f"  self-contact: {'built' if sc is not None else 'not built'}")
-    if resume:
-        if fc is not None:
-            fc.dissipation_total = float(data["contact_dissipation"])
-        rank0_print(f"  resumed from the checkpoint after step {start['step']} (row {keep})")
-    plan = _plan(scene, motions)
-    t_end, angle_at, measure = plan.t_end, plan.angle_at, plan.measure
-    k_torque, name = plan.k_torque, scene["scene"]["name"]
-    n = model.n_owned
-    in_aj = measure.fixed_mask(fc.X) if fc is not None else None  # hinge AJ (reference)
-    table = None  # the [[torques]] measures (a body is required by the scene's validation)
-    if scene["torques"]:
-        table = TorqueTable(scene, motions, fc.X, aj_mask=_aj_mask, centre=torque_centre)
-        if resume:
-            keep_torque_rows(out, keep, comm)
-
-    pressure = None  # Pa, nodal (lam / reference lumped area), last step
-    if fc is not None:
-        S = fem.FunctionSpace(model.mesh, model.V.ufl_element().sub_elements()[0])
-        pressure = fem.Function(S, name="contact_pressure")
-        area = fc.mass / (model.material.rho * model.thickness)  # reference lumped areas [m^2]
-    model.u.name = "displacement"
-    interval = o["interval"]
-    fields = () if pressure is None else (pressure,)
-
-    def snapshot(tag: str, t: float) -> None:
-        _snapshot(scene, model, out, comm, tag, bodies_at(t)[0], pressure=pressure)
-
-    def ends_row(t: float) -> bool:
-        """The step to ``t`` ends a history row (one row per interval, and the last step)."""
-        return t >= (state["row"] + 1) * interval - 1e-12 or t >= t_end - 1e-12
-
-    acc = {"tau": np.zeros(3), "res": np.zeros(3), "flex": 0.0, "n": 0, "work": 0.0}
-    state.setdefault("work", 0.0)  # joint work up to the last row [J] (all ranks)
-    hinge_motion = _measured_hinge(motions, k_torque)
-    progress = Progress(
-        label=name,
-        comm=comm,
-        start=min(max(start.get("time", 0.0) / t_end, 0.0), 1.0) if t_end > 0 else 0.0,
-    )
-    state["t_last"] = 0.0  # time of the last step [s]
-
-    def local_torque_and_resultant(t: float) -> tuple[np.ndarray, float, np.ndarray, float]:
-        """Eq. 28 torque about J(t), its flexion component and the contact resultant of this
-        step over the owned nodes, and the power [W] the measured joint spends against the
-        garment in it (-tau_seg . omega, tau_seg the torque of the forces on the moving segment
-        about its joint; not reduced: the runner sums them over a row's steps and reduces once
-        per row)."""
-        if fc is None:
-            return np.zeros(3), 0.0, np.zeros(3), 0.0
-        f = fc.forces_on_body()
-        body = fc.contact_body()
-        touching = body == k_torque
-        x = fc.X + model.u.x.array[: 3 * n].reshape(n, 3)
-        tau, flex = measure.local(t=t, x=x, force_on_body=f, body=body, fixed=in_aj)
-        if table is not None:
-            table.add(t=t, x=x, force_on_body=f, body=body)
-        power = 0.0
-        if hinge_motion is not None and t > t_settle and touching.any():
-            omega = hinge_motion.pose(t - t_settle).angular_velocity
-            if omega.any():
-                seg = joint_torque(x[touching], f[touching], hinge_motion.joint)
-                power = float(joint_power(seg, omega))
-        return tau, flex, f.sum(axis=0), power
-
-    resume_after = start["time"] if resume else None
-    with ResultWriter(out, model, keep_rows=keep, resume_after=resume_after) as writer:
-
-        def on_state(r, v, a) -> None:  # after on_step: checkpoint at the cadence of rows
-            if not state.pop("checkpoint", False):
-                return
-            run = {"run_step": r.step, "run_row": state["row"], "run_snap": state["snap"]}
-            run["run_time"] = r.time
-            run.update(run_external_work=r.external_work, run_damping_work=r.damping_work)
-            if r.clock is not None and r.clock[1] > 0:  # the step shrank: save its clock
-                keys = ("t_base", "step_base", "h", "n_end")
-                run.update({f"run_clock_{k}": val for k, val in zip(keys, r.clock, strict=True)})
-            dissipation = fc.dissipation_total if fc is not None else 0.0
-            run.update(run_pen=state["pen"], contact_dissipation=dissipation, dt=dt)
-            run.update(run_work=state["work"])
-            if sc is not None:  # the run's self-contact totals (summary)
-                run.update(
-                    run_self_max=state.get("self_max", 0), run_self_left=state.get("self_left", 0)
-                )
-            run.update({f"st_{k}": getattr(st, k) for k in StableStep.__dataclass_fields__})
-            model_data = {f"model_{k}": val for k, val in model.state_arrays().items()}
-            arrays = {"v": v.getArray(readonly=True).copy(), "a": a.getArray(readonly=True)}
-            _checkpoint(
-                out, comm, {**model_data, **arrays, **{k: np.array(x) for k, x in run.items()}}
-            )
-
-        def on_step(r) -> None:
-            model.commit_material()  # the step is accepted: yarn-friction history to x_n+1
-            tau_local, flex_local, res_local, power = local_torque_and_resultant(r.time)
-            acc["tau"] += tau_local
-            acc["flex"] += flex_local
-            acc["res"] += res_local
-            acc["work"] += power * r.dt  # the impulse rule of report.joint_work
-            acc["n"] += 1
-            state["t_last"] = r.time
-            if not ends_row(r.time):
-                return
-            h = fc.collect() if fc is not None else _NO_CONTACT  # the row's contact (collective)
-            state["row"] += 1
-            frame = state["row"] % o["every"] == 0 or r.time >= t_end - 1e-12  # and the last
-            k = acc["n"]
-            sums = np.concatenate([acc["tau"], acc["res"], [acc["work"], acc["flex"]]])
-            comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)  # one reduction per row
-            tau, res, flex = sums[:3] / k, sums[3:6] / k, float(sums[7]) / k
-            state["work"] += float(sums[6])
-            if table is not None:
-                rows = table.rows(comm=comm, steps=k, increment=state["row"], time=r.time)
-                append_torques(out, rows, comm)
-            angle = angle_at(r.time)
-            now = time.perf_counter()
-            pen_after = max(0.0, -h.min_gap_after) if math.isfinite(h.min_gap_after) else 0.0
-            state["pen"] = max(state["pen"], pen_after)
-            tio = time.perf_counter()
-            if pressure is not None:
-                pressure.x.array[:n] = fc.nodal_multipliers() / area
-                pressure.x.scatter_forward()
-            if frame:
-                writer.write_fields(r.time, fields)
-            t_io = time.perf_counter() - tio
-            self_columns = _self_contact_columns(sc, state, frame=frame)
-            row = {
-                "stage": "settle" if r.time <= t_settle + 1e-12 else "motion",
-                "increment": state["row"],
-                "time": r.time,
-                "dt": r.dt,
-                "load_factor": r.load_factor,
-                "angle_deg": angle,
-                **_torque_columns(tau, res, flex),
-                "n_active": h.active,
-                "max_penetration": pen_after,
-                "predictor_penetration": h.max_penetration,
-                "sum_lam": h.sum_lambda,
-                "n_stick": h.n_stick,
-                "n_slip": h.active - h.n_stick,
-                "substeps": k,
-                **yarn_strain_columns(model),
-                "kinetic_energy": r.kinetic,
-                "strain_energy": r.strain,
-                "external_work": r.external_work,
-                "joint_work": state["work"],
-                "dissipation_total": fc.dissipation_total if fc is not None else 0.0,
-                "dissipation_material": model.dissipated_material(),
-                "t_contact": fc.wall - state["contact_wall"] if fc is not None else 0.0,
-                **self_columns,
-                "t_io": t_io,
-                "wall_time": now - state["t_row"],
-                "elapsed": now - t0,
-            }
-            state["contact_wall"], state["t_row"] = fc.wall if fc is not None else 0.0, now
-            writer.append_row(row)
-            every = o["checkpoint_every"]
-            state["checkpoint"] = bool(every) and state["row"] % every == 0
-            acc.update(tau=np.zeros(3), res=np.zeros(3), flex=0.0, n=0, work=0.0)
-            summary.update(
-                final_angle_deg=angle,
-                time=r.time,
-                steps=r.step,
-                cutbacks=0,
-                dt=r.dt,
-                dt_crit=st.dt_crit,
-                max_penetration=state["pen"],
-                newton_iterations=0,
-            )
-            if sc is not None:
-                summary.update(
-                    self_intersections_max=state.get("self_max", 0),
-                    self_crossings_left=state.get("self_left", 0),
-                    self_contact_wall=sc.wall,
-                )
-            frac = min(max(r.time / t_end, 0.0), 1.0) if t_end > 0 else 1.0
-            progress.update(
-                frac,
-                (
-                    f"t {r.time:7.4f} s  angle {angle:6.2f} deg  |tau| {row['torque_mag']:.4f} N m"
-                    f"  active {h.active}"
-                    if fc is not None
-                    else f"t {r.time:7.4f} s  kinetic energy {r.kinetic:.3e} J"
-                )
-                + f"  row {state['row']}  steps {r.step}",
-            )
-            _progress_snapshots(
-                plan, state, row["stage"], angle, lambda tag: snapshot(tag, r.time), t=r.time
-            )
-            where = f"row {state['row']} (t = {r.time:.6g} s)"
-            _stop_with_fields(check_stop, where, writer, r.time, lambda: fields)
-
-        try:
-            integrate_explicit(
-                system,
-                t_end=t_end,
-                dt=dt,
-                load=load,
-                on_step=on_step,
-                stable=st,
-                contact=fc if sc is None else sc,
-                safety=sv["safety"],
-                recheck_every=sv["recheck_every"],
-                clock=start["clock"],
-                work=start["work"],
-                first_step=start["step"],
-                velocity=start["v"],
-                acceleration=start["a"],
-                on_state=on_state,
-                measure=lambda _k, t: ends_row(t),  # the strain energy only for the rows
-                damping=Damping(mass=sv["settle_damping"]),
-                damping_until=t_settle,
-            )
-            snapshot("final", t_end)
-        except (DynamicsDivergence, FloatingPointError) as exc:
-            t_stop = state["t_last"]
-            snapshot(f"stopped_{angle_at(t_stop):04.1f}deg", t_stop)
-            raise SolverDivergence(
-                f"explicit run stopped at t = {t_stop:.6g} s ({angle_at(t_stop):.2f} deg): {exc}"
-            ) from None
-        finally:
-            progress.close()
-            _end_together(comm)
-            if o["png"] and comm.rank == 0 and writer.csv_path.exists():
-                if scene["body"]:
-                    _torque_plot(writer.csv_path, out / "torque_angle.png", name, _events(summary))
-                if table is not None:
-                    k = torque_segment_index(scene)
-                    primary = scene["body"][k]["name"] if k is not None else "[contact]"
-                    plot_torques(out, out / "torques.png", primary=primary, title=name,
-                                 events=_events(summary))  # fmt: skip
-                _animation(scene, out, lambda t: bodies_at(t)[0])
-    return out
+    while taken <= 3 and angle >= quarters[taken - 1] - 1e-9:
+        snap(f"{quarters[taken - 1]:04.1f}deg")
+        taken += 1
+    return taken

@@ -759,8 +759,9 @@ SCHEMA: dict[str, Section] = {
                 "choice", "as contact.flexion_axis", default="e3", choices=("e2", "e3")
             ),
         },
-        "explicit runs: more Eq. 28 joint torques measured besides the one of [contact] (e.g. "
-        "the left knee and the hips), one row per measure and history row in torques.csv",
+        "dynamic runs (explicit or newmark): more Eq. 28 joint torques measured besides the "
+        "one of [contact] (e.g. the left knee and the hips), one row per measure and history "
+        "row in torques.csv",
         many=True,
         optional=True,
     ),
@@ -1363,7 +1364,7 @@ def _validate_size(out: dict[str, Any]) -> None:
 
 
 def _validate_torques(out: dict[str, Any]) -> None:
-    """The ``[[torques]]`` measures: unique names, explicit runs with a body, and the Eq. 28
+    """The ``[[torques]]`` measures: unique names, dynamic runs with a body, and the Eq. 28
     keys checked as those of ``[contact]`` (:func:`torque_entry`)."""
     names = [m["name"] for m in out["torques"]]
     for i, m in enumerate(out["torques"]):
@@ -1374,8 +1375,8 @@ def _validate_torques(out: dict[str, Any]) -> None:
             _fail(f"{path}.name", f"must be unique, got {m['name']!r} twice")
         if not out["body"]:
             _fail(path, "needs a body: add [[body]] segments")
-        if out["solver"]["integrator"] != "explicit":
-            _fail(path, "is measured by solver.integrator = 'explicit' only")
+        if out["solver"]["integrator"] == "static":
+            _fail(path, "is measured by solver.integrator = 'explicit' or 'newmark', not 'static'")
         _validate_torque(torque_entry(out, m)["contact"], out["body"], path=path)
 
 

@@ -71,12 +71,14 @@ class TorqueTable:
     def __len__(self) -> int:
         return len(self.entries)
 
-    def add(self, *, t: float, x, force_on_body, body) -> None:
-        """Add this step's torques of this rank's nodes (positions ``x`` [m], forces on the
-        body [N], touching segment per node, -1 none) to the row's sums."""
+    def add(self, *, t: float, x, force_on_body, body, nodes=None) -> None:
+        """Add this step's torques of this rank's points (positions ``x`` [m], forces on the
+        body [N], touching segment per point, -1 none; ``nodes``: their owned node indices,
+        None: the points are the owned nodes) to the row's sums."""
         for k, e in enumerate(self.entries):
+            fixed = e.fixed if e.fixed is None or nodes is None else e.fixed[nodes]
             tau, flex = e.measure.local(
-                t=t, x=x, force_on_body=force_on_body, body=body, fixed=e.fixed
+                t=t, x=x, force_on_body=force_on_body, body=body, fixed=fixed
             )
             self.sums[k, :3] += tau
             self.sums[k, 3] += flex

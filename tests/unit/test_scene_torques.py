@@ -64,16 +64,15 @@ def test_bad_torques_one_line(torques, solver, message):
     assert message in str(err.value) and "\n" not in str(err.value)
 
 
-def test_torques_need_the_explicit_integrator():
-    data = tomllib.loads(SCENE.read_text())
-    data["initial"] = {}
-    data["torques"] = [{"name": "k", "segment": "L_shank"}]
-    sets = ["solver.integrator=newmark"]
-    unset = ["solver.settle_damping", "contact.self_contact", "output.interval"]
-    with pytest.raises(scenes.SceneError, match=r"'torques\[0\]': is measured by"):
-        scenes.validate(
-            scenes.apply_overrides(scenes.remove_keys(data, unset), sets), base=SCENE.parent
-        )
+def test_torques_need_a_dynamic_integrator():
+    """The quasi-static runner measures only the [contact] torque: [[torques]] in a static
+    scene is refused at load."""
+    ci = SCENE.parent / "arm_sleeve_ci.toml"
+    data = tomllib.loads(ci.read_text())
+    assert data["solver"]["integrator"] == "static"
+    data["torques"] = [{"name": "k", "segment": "forearm"}]
+    with pytest.raises(scenes.SceneError, match=r"'torques\[0\]': is measured by .* not 'static'"):
+        scenes.validate(data, base=ci.parent)
 
 
 def test_build_log_names_the_measures():

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from clothfem import runners
+from clothfem import runners, simulation
 from clothfem import scene as scenes
 from clothfem.cli import main
 from clothfem.history import NAMES as HISTORY_NAMES
@@ -189,7 +189,7 @@ def test_failed_start_writes_nothing(tmp_path, capsys):
 def _run_keeping_checkpoints(scene, out: Path, keep: tuple[int, ...]) -> dict[int, Path]:
     """Run ``scene`` into ``out`` and copy the checkpoint folder after the checkpoints
     number ``keep`` (1-based) to ``out.parent / ck<k>``."""
-    original = runners._checkpoint
+    original = simulation.save_checkpoint
     count, kept = {"k": 0}, {}
 
     def checkpoint(folder, comm, data):
@@ -202,11 +202,11 @@ def _run_keeping_checkpoints(scene, out: Path, keep: tuple[int, ...]) -> dict[in
             comm.barrier()
             kept[count["k"]] = dest
 
-    runners._checkpoint = checkpoint
+    simulation.save_checkpoint = checkpoint
     try:
         run_scene(scene, out, comm=COMM)
     finally:
-        runners._checkpoint = original
+        simulation.save_checkpoint = original
     return kept
 
 
@@ -367,6 +367,37 @@ def test_resume_keeps_the_torque_table(tmp_path):
     if COMM.rank == 0:
         ref, res = ((p / "torques.csv").read_text() for p in (base / "reference", base / "resumed"))
         assert res == ref and ref.count("\n") == len(_rows(base / "reference")) + 1
+
+
+@pytest.mark.parametrize("sets", [EXPLICIT, NEWMARK], ids=["explicit", "newmark"])
+def test_torque_table_repeats_the_contact_measure(tmp_path, sets):
+    """Both integrators measure [[torques]] through the same runner: an entry that repeats
+    the scene's [contact] measure (forearm, nodes past the elbow plane) gives, row by row,
+    the history's torque columns, and the entry about the same joint over all nodes differs
+    from it once the sleeve touches the upper arm."""
+    base = _shared(tmp_path)
+    data = tomllib.loads(CI.read_text())
+    data["torques"] = [
+        {"name": "same", "segment": "forearm", "aj": "beyond_joint"},
+        {"name": "all_about_j", "segment": "forearm", "aj": "all"},
+    ]
+    data = scenes.apply_overrides(scenes.remove_keys(data, UNSET_STATIC), sets)
+    scene = scenes.validate(data, base=CI.parent)
+    assert scene["contact"]["aj"] == "beyond_joint" and scene["contact"]["torque_point"] is None
+    run_scene(scene, base / "run", comm=COMM)
+    if COMM.rank == 0:
+        rows = _rows(base / "run")
+        with (base / "run" / "torques.csv").open(newline="") as fh:
+            table = list(csv.DictReader(fh))
+        same = [r for r in table if r["name"] == "same"]
+        every = [r for r in table if r["name"] == "all_about_j"]
+        assert len(same) == len(every) == len(rows)
+        for r, m in zip(rows, same, strict=True):
+            assert m["time"] == r["time"]
+            for col in ("torque_x", "torque_y", "torque_z", "torque_flex"):
+                assert float(m[col]) == pytest.approx(float(r[col]), rel=1e-12, abs=1e-15)
+        pairs = zip(every, same, strict=True)
+        assert any(float(a["torque_mag"]) != float(b["torque_mag"]) for a, b in pairs)
 
 
 def test_field_series_in_both_readers(tmp_path):

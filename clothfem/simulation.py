@@ -1,0 +1,792 @@
+"""One runner for the time integrators of a scene (Model / State / Control).
+
+:func:`run_dynamic` advances any dynamic scene — a garment on a moving body or a free drape —
+with the scene's integrator and writes the same outputs for each. Its parts:
+
+* **Model**: the shell (:class:`clothfem.shell.ShellModel`, forms built once) and what the
+  integrator builds from it for this scene only (contact when the scene has a body,
+  self-contact when asked); the build log names what was left out.
+* **Control** (:class:`Control`): what the scene prescribes at time t — the load factor and
+  the body poses (at rest until ``solver.settle_time``, then each segment's motion).
+* **State**: the integrator's arrays (positions, velocities, accelerations, directors,
+  material histories, contact state: ``Integrator.state_arrays``) and the runner's counters
+  (:class:`_Counters`), saved together in one ``.npz`` per rank
+  (:func:`clothfem.runners.save_checkpoint`) and restored by ``--resume``.
+* **Integrators** behind one interface (:class:`Integrator`): ``explicit`` (central
+  difference with forward-increment Lagrange multipliers, Sec. 3.2) and ``newmark``
+  (Newmark with Lagrange multipliers and an active set, Sec. 3.1.3). Each advances the state
+  step by step and hands every accepted step to the runner, with the contact forces on the
+  body per node (or per node-ellipsoid pair).
+* **Measures**, the same for every integrator: the Eq. 28 torque
+  (:class:`clothfem.torque_measure.TorqueMeasure`), the ``[[torques]]`` table, the work of
+  the measured joint (:class:`_JointWork`), energies and dissipation.
+
+History rows: one per accepted step for an integrator whose contact forces are a state
+(Newmark), one per ``output.interval`` for one whose forces are impulses (explicit: the
+torque, resultant and multiplier sum are then the means over the row's steps). The columns
+are :data:`clothfem.history.COLUMNS` for both. Fields every ``output.every`` rows and at the
+end; a checkpoint every ``output.checkpoint_every`` rows.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+from dolfinx import fem
+from mpi4py import MPI
+
+from .contact.forces import joint_torque
+from .history import yarn_strain_columns
+from .io import Progress, ResultWriter, rank0_print
+from .report import joint_power, joint_work
+from .runners import (
+    _aj_mask,
+    _animation,
+    _bodies_at,
+    _end_together,
+    _events,
+    _measured_hinge,
+    _plan,
+    _progress_snapshots,
+    _snapshot,
+    _stop_with_fields,
+    _torque_columns,
+    _torque_plot,
+    _write_events,
+    body_motions,
+    load_checkpoint,
+    save_checkpoint,
+    torque_centre,
+)
+from .shell import ShellModel
+from .static import SolverDivergence
+from .torque_measure import torque_segment_index
+from .torque_table import TorqueTable
+from .torque_table import append as append_torques
+from .torque_table import keep_rows as keep_torque_rows
+from .torque_table import plot as plot_torques
+
+__all__ = ["BodyForces", "Control", "Integrator", "run_dynamic"]
+
+
+@dataclass(frozen=True)
+class Control:
+    """What a scene prescribes at time t [s]: the load factor ``load(t)`` (0..1, ramped over
+    ``solver.ramp_time``) and the body ``bodies_at(t) -> (ellipsoids, velocities)``; the body
+    rests until ``t_settle`` [s]; the run ends at ``t_end`` [s]."""
+
+    load: Callable[[float], float]
+    bodies_at: Callable[[float], tuple[list, list]]
+    t_settle: float
+    t_end: float
+
+    def stage(self, t: float) -> str:
+        """``settle`` while the body rests, then ``motion``."""
+        return "settle" if t <= self.t_settle + 1e-12 else "motion"
+
+
+def control_from_scene(scene: dict[str, Any], motions: list, t_end: float) -> Control:
+    """The :class:`Control` of a validated dynamic scene."""
+    t_ramp = scene["solver"]["ramp_time"]
+    return Control(
+        load=(lambda t: min(t / t_ramp, 1.0)) if t_ramp > 0 else (lambda t: 1.0),
+        bodies_at=_bodies_at(scene, motions),
+        t_settle=scene["solver"]["settle_time"],
+        t_end=t_end,
+    )
+
+
+@dataclass(frozen=True)
+class BodyForces:
+    """The contact forces of one accepted step on this rank: points ``x`` (m, 3) [m], the
+    forces they exert on the body ``force_on_body`` (m, 3) [N], the ellipsoid each touches
+    ``body`` (m,) (-1: none), and ``nodes`` (m,), their owned node indices (None: the
+    points are the owned nodes in order)."""
+
+    x: np.ndarray
+    force_on_body: np.ndarray
+    body: np.ndarray
+    nodes: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class StepInfo:
+    """An accepted step as the runner sees it."""
+
+    time: float  # at its end [s]
+    dt: float  # [s]
+
+
+class Integrator(Protocol):
+    """A time integrator of the generic runner, built as ``cls(scene, model, control, comm,
+    data=checkpoint or None)`` (a checkpoint's arrays restore its state)."""
+
+    impulsive: bool  # contact forces are impulses of a step (rows average them)
+    label: str  # for messages: "explicit run", "dynamic contact"
+    failures: tuple[type[BaseException], ...]  # errors that stop the run as a divergence
+    X: np.ndarray | None  # owned nodes' reference positions (n, 3) [m] (None: no body)
+
+    def run(
+        self,
+        *,
+        on_step: Callable[[StepInfo], None],
+        after_step: Callable[[Callable[[], dict[str, np.ndarray]]], None],
+        ends_row: Callable[[float], bool],
+    ) -> None:
+        """Advance to ``control.t_end``: ``on_step`` after every accepted step, then
+        ``after_step(arrays)`` (``arrays()``: the state to checkpoint); ``ends_row(t)``:
+        whether the step to t ends a history row (its energies are then measured)."""
+
+    def body_forces(self) -> BodyForces | None:
+        """The last step's contact forces on the body (None without a body)."""
+
+    def pressure(self) -> np.ndarray | None:
+        """Contact pressure [Pa] per owned node (collective; None without a body)."""
+
+    def row(self, *, frame: bool) -> dict[str, float]:
+        """The integrator's history columns of a row (collective); ``frame``: fields are
+        written with it."""
+
+    def summary(self) -> dict[str, Any]:
+        """Its entries of ``summary.json`` so far."""
+
+    def progress(self) -> str:
+        """Its part of the progress line."""
+
+
+@dataclass
+class _Counters:
+    """The runner's part of the state (checkpointed as ``run_<name>``)."""
+
+    step: int = 0  # accepted steps
+    row: int = 0  # history rows written
+    snap: int = 0  # progress snapshots taken
+    pen: float = 0.0  # largest penetration after correction [m]
+    time: float = 0.0  # of the last row [s]
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {f"run_{k}": np.array(v) for k, v in vars(self).items()}
+
+    @classmethod
+    def from_arrays(cls, data: dict[str, np.ndarray]) -> _Counters:
+        kinds = {"step": int, "row": int, "snap": int, "pen": float, "time": float}
+        return cls(**{k: kind(data[f"run_{k}"]) for k, kind in kinds.items()})
+
+
+@dataclass
+class _JointWork:
+    """The work [J] the measured joint (a hinge) does against the garment,
+    -int tau_seg . omega dt with tau_seg the torque of the contact forces on its segment about
+    its joint: one impulse per step for impulsive forces, else the trapezoid rule over the
+    hinge angle of :func:`clothfem.report.joint_work` (the segment torque is a state)."""
+
+    motion: Any  # HingeMotion or None
+    k: int | None  # its segment
+    axis: np.ndarray
+    t_settle: float
+    impulsive: bool
+    work: float = 0.0  # up to the last row
+    theta: float = 0.0  # hinge angle at the last row [rad]
+    tau_axis: float = 0.0  # segment torque about the axis at the last row [N m]
+    local: np.ndarray = field(default_factory=lambda: np.zeros(4))  # impulse work, seg (3)
+
+    def add(self, *, t: float, dt: float, forces: BodyForces) -> None:
+        """This step's local part (summed over the row's steps, reduced by the runner)."""
+        if self.motion is None:
+            return
+        on = forces.body == self.k
+        if not on.any():
+            if not self.impulsive:
+                self.local[1:] = 0.0
+            return
+        seg = joint_torque(forces.x[on], forces.force_on_body[on], self.motion.joint)
+        if not self.impulsive:
+            self.local[1:] = seg
+        elif t > self.t_settle:
+            omega = self.motion.pose(t - self.t_settle).angular_velocity
+            if omega.any():
+                self.local[0] += float(joint_power(seg, omega)) * dt
+
+    def close_row(self, reduced: np.ndarray, t: float) -> float:
+        """The work up to this row from the row's ``reduced`` local parts."""
+        if self.motion is not None and not self.impulsive:
+            tau_axis = float(reduced[1:] @ self.axis)
+            theta = self.motion.angle(max(t - self.t_settle, 0.0))
+            th, ta = np.array([self.theta, theta]), np.array([self.tau_axis, tau_axis])
+            self.work += float(joint_work(th, ta, 1.0)[-1])
+            self.theta, self.tau_axis = theta, tau_axis
+        else:
+            self.work += float(reduced[0])
+        self.local[:] = 0.0
+        return self.work
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {f"run_{k}": np.array(getattr(self, k)) for k in ("work", "theta", "tau_axis")}
+
+    def restore(self, data: dict[str, np.ndarray]) -> None:
+        self.work, self.theta, self.tau_axis = (
+            float(data[f"run_{k}"]) for k in ("work", "theta", "tau_axis")
+        )
+
+
+class _Explicit:
+    """Central difference with the lumped mass and forward-increment Lagrange multipliers
+    (:class:`clothfem.contact.film.FilmContact`, built only with a body), fixed step
+    ``solver.safety`` x the stable step at t = 0 (shrinking with ``solver.recheck_every``);
+    fabric self-contact when ``contact.self_contact``; mass damping while settling
+    (``solver.settle_damping``)."""
+
+    impulsive = True
+    label = "explicit run"
+
+    def __init__(self, scene, model: ShellModel, control: Control, comm, *, data) -> None:
+        from .contact.film import FilmContact, FilmParameters
+        from .contact.self_contact import SelfContact
+        from .dynamics import DynamicsDivergence, ShellSystem
+
+        self.failures = (DynamicsDivergence, FloatingPointError)
+        self.scene, self.model, self.control, self.comm = scene, model, control, comm
+        sv, c = scene["solver"], scene["contact"]
+        self.system = ShellSystem(model, rotary_scale=sv["rotary_scale"])
+        self.start: dict[str, Any] = {"step": 0, "v": None, "a": None, "clock": None}
+        self.start["work"] = (0.0, 0.0)
+        self.self_max = self.self_left = 0
+        if data is not None:
+            self._restore(data)
+        else:
+            self._stable_step()
+        rank0_print(
+            f"  explicit: dt_crit {self.st.dt_crit:.4e} s (Lanczos "
+            f"{'converged' if self.st.converged else 'not converged'} in {self.st.iterations}), "
+            f"dt {self.dt:.4e} s"
+        )
+        self.fc = None
+        if scene["body"]:
+            self.fc = FilmContact(
+                self.system,
+                control.bodies_at,
+                params=FilmParameters(mu=c["mu"], kernel=c["kernel"]),
+            )
+            if data is not None:
+                self.fc.dissipation_total = float(data["contact_dissipation"])
+        # fabric self-contact (contact.self_contact): FILM, then the self-contact correction
+        self.sc = SelfContact.from_scene(self.system, c, film=self.fc) if scene["body"] else None
+        rank0_print(f"  self-contact: {'built' if self.sc is not None else 'not built'}")
+        self.X = self.fc.X if self.fc is not None else None
+        self.area = None
+        if self.fc is not None:  # reference lumped areas [m^2]
+            self.area = self.fc.mass / (model.material.rho * model.thickness)
+        self.last = None
+        self.wall = 0.0  # contact wall time up to the last row [s]
+
+    def _stable_step(self) -> None:
+        from .dynamics import stable_time_step
+        from .shell.viscosity import explicit_step_factor
+
+        self.st = stable_time_step(self.system, lam=self.control.load(0.0), iterations=600)
+        self.dt = self.scene["solver"]["safety"] * self.st.dt_crit
+        visc, mat = self.model.material.viscosity, self.model.material
+        if visc is not None:  # the damped central difference's smaller stable step
+            factor = explicit_step_factor(
+                omega=self.st.omega_max, viscosity=visc, E1=mat.E1, E2=mat.E2, G12=mat.G12
+            )
+            self.dt *= factor
+            rank0_print(f"  explicit: membrane viscosity, step x {factor:.3f}")
+
+    def _restore(self, data) -> None:
+        from .dynamics import StableStep
+        from .scene import SceneError
+
+        self.model.restore_arrays({k[6:]: data[k] for k in data if k.startswith("model_")})
+        for k in ("v", "a"):
+            vec = self.system.create_vector()
+            if data[k].shape != vec.getArray().shape:
+                raise SceneError("--resume: the checkpoint does not match this mesh / ranks")
+            vec.getArray()[:] = data[k]
+            self.start[k] = vec
+        self.st = StableStep(
+            *(float(data[f"st_{k}"]) for k in ("dt_crit", "omega_max", "dt_bound")),
+            int(data["st_iterations"]),
+            bool(data["st_converged"]),
+        )
+        self.dt = float(data["dt"])
+        self.start["step"] = int(data["run_step"])
+        if "run_clock_h" in data:  # the step had shrunk: continue its clock
+            c0 = [data[f"run_clock_{k}"] for k in _CLOCK]
+            self.start["clock"] = (float(c0[0]), int(c0[1]), float(c0[2]), int(c0[3]))
+        self.start["work"] = (float(data["run_external_work"]), float(data["run_damping_work"]))
+        if "run_self_max" in data:
+            self.self_max, self.self_left = int(data["run_self_max"]), int(data["run_self_left"])
+
+    def run(self, *, on_step, after_step, ends_row) -> None:
+        from .dynamics import Damping, integrate_explicit
+
+        sv = self.scene["solver"]
+
+        def step(r) -> None:
+            self.last = r
+            on_step(StepInfo(time=r.time, dt=r.dt))
+
+        integrate_explicit(
+            self.system,
+            t_end=self.control.t_end,
+            dt=self.dt,
+            load=self.control.load,
+            on_step=step,
+            stable=self.st,
+            contact=self.fc if self.sc is None else self.sc,
+            safety=sv["safety"],
+            recheck_every=sv["recheck_every"],
+            clock=self.start["clock"],
+            work=self.start["work"],
+            first_step=self.start["step"],
+            velocity=self.start["v"],
+            acceleration=self.start["a"],
+            on_state=lambda r, v, a: after_step(lambda: self._arrays(r, v, a)),
+            measure=lambda _k, t: ends_row(t),  # the strain energy only for the rows
+            damping=Damping(mass=sv["settle_damping"]),
+            damping_until=self.control.t_settle,
+        )
+
+    def _arrays(self, r, v, a) -> dict[str, np.ndarray]:
+        from .dynamics import StableStep
+
+        run: dict[str, Any] = {"run_external_work": r.external_work}
+        run["run_damping_work"] = r.damping_work
+        if r.clock is not None and r.clock[1] > 0:  # the step shrank: save its clock
+            run.update({f"run_clock_{k}": val for k, val in zip(_CLOCK, r.clock, strict=True)})
+        run["contact_dissipation"] = self.fc.dissipation_total if self.fc is not None else 0.0
+        run["dt"] = self.dt
+        if self.sc is not None:  # the run's self-contact totals (summary)
+            run.update(run_self_max=self.self_max, run_self_left=self.self_left)
+        run.update({f"st_{k}": getattr(self.st, k) for k in StableStep.__dataclass_fields__})
+        data = {f"model_{k}": val for k, val in self.model.state_arrays().items()}
+        data.update(v=v.getArray(readonly=True).copy(), a=a.getArray(readonly=True))
+        return {**data, **{k: np.array(x) for k, x in run.items()}}
+
+    def body_forces(self) -> BodyForces | None:
+        if self.fc is None:
+            return None
+        n = self.model.n_owned
+        x = self.fc.X + self.model.u.x.array[: 3 * n].reshape(n, 3)
+        return BodyForces(x=x, force_on_body=self.fc.forces_on_body(), body=self.fc.contact_body())
+
+    def pressure(self) -> np.ndarray | None:
+        return None if self.fc is None else self.fc.nodal_multipliers() / self.area
+
+    def row(self, *, frame: bool) -> dict[str, float]:
+        r = self.last
+        h = self.fc.collect() if self.fc is not None else _NO_CONTACT  # collective
+        pen_after = max(0.0, -h.min_gap_after) if math.isfinite(h.min_gap_after) else 0.0
+        wall = self.fc.wall if self.fc is not None else 0.0
+        self.active, row = (
+            h.active,
+            {
+                "load_factor": r.load_factor,
+                "n_active": h.active,
+                "max_penetration": pen_after,
+                "predictor_penetration": h.max_penetration,
+                "sum_lam": h.sum_lambda,
+                "n_stick": h.n_stick,
+                "n_slip": h.active - h.n_stick,
+                "kinetic_energy": r.kinetic,
+                "strain_energy": r.strain,
+                "external_work": r.external_work,
+                "dissipation_total": self.fc.dissipation_total if self.fc is not None else 0.0,
+                "t_contact": wall - self.wall,
+                **self._self_contact_columns(frame=frame),
+            },
+        )
+        self.wall = wall
+        return row
+
+    def _self_contact_columns(self, *, frame: bool) -> dict[str, float]:
+        """The correction's diagnostics since the last row and, at a field frame, the
+        independent intersection count of the written surface (collective)."""
+        if self.sc is None:
+            return {}
+        rec = self.sc.collect()
+        row = {
+            "self_pairs": rec.contacts,
+            "self_min_gap": rec.min_gap if math.isfinite(rec.min_gap) else math.nan,
+            "self_crossings": rec.crossings,
+            "self_crossings_left": rec.crossings_left,
+            "self_zone_nodes": rec.zone_nodes,
+            "t_self_contact": rec.wall,
+        }
+        self.self_left += rec.crossings_left
+        if frame:
+            t0 = time.perf_counter()
+            row["self_intersections"] = self.sc.intersections()
+            self.self_max = max(self.self_max, row["self_intersections"])
+            row["t_self_contact"] += time.perf_counter() - t0
+        return row
+
+    def summary(self) -> dict[str, Any]:
+        out = {"cutbacks": 0, "dt": self.last.dt, "dt_crit": self.st.dt_crit}
+        out["newton_iterations"] = 0
+        if self.sc is not None:
+            out.update(self_intersections_max=self.self_max, self_crossings_left=self.self_left)
+            out["self_contact_wall"] = self.sc.wall
+        return out
+
+    def progress(self) -> str:
+        if self.fc is None:
+            return f"kinetic energy {self.last.kinetic:.3e} J"
+        return f"active {self.active}"
+
+
+_CLOCK = ("t_base", "step_base", "h", "n_end")
+
+
+@dataclass(frozen=True)
+class _NoContact:
+    """The contact diagnostics of a row without a body."""
+
+    active: int = 0
+    n_stick: int = 0
+    max_penetration: float = 0.0
+    min_gap_after: float = math.inf
+    sum_lambda: float = 0.0
+
+
+_NO_CONTACT = _NoContact()
+
+
+class _Newmark:
+    """Newmark (gamma = ``solver.gamma``, beta = (gamma + 1/2)^2 / 4) with Lagrange-multiplier
+    contact and an active set (:class:`clothfem.contact.dynamic.DynamicContact`), steps of
+    ``solver.dt`` halved on failure down to ``solver.dt_min``."""
+
+    impulsive = False
+    label = "dynamic contact"
+
+    def __init__(self, scene, model: ShellModel, control: Control, comm, *, data) -> None:
+        from .contact.dynamic import DynamicContact
+        from .contact.lagrange import ContactDivergence, LagrangeContactParameters
+        from .dynamics import ShellSystem
+
+        self.failures = (ContactDivergence,)
+        self.scene, self.model, self.control, self.comm = scene, model, control, comm
+        c, sv = scene["contact"], scene["solver"]
+        gamma = sv["gamma"]
+        self.dc = DynamicContact(
+            ShellSystem(model, rotary_scale=sv["rotary_scale"]),
+            control.bodies_at,
+            params=LagrangeContactParameters(
+                mu=c["mu"],
+                tangential_penalty=c["tangential_penalty"],
+                semismooth_passes=c["semismooth_passes"],
+                newton_stall_limit=c["newton_stall_limit"],
+            ),
+            beta=(gamma + 0.5) ** 2 / 4,
+            gamma=gamma,
+        )
+        self.contact = self.dc.contact
+        self.X = self.contact.X
+        self.cut = self.newton = 0  # totals of the run
+        if data is not None:
+            self.dc.restore_arrays(data)
+            self.cut, self.newton = int(data["run_cut"]), int(data["run_newton"])
+        self.timers = dict(self.contact.timers)
+        self.last = None
+
+    def run(self, *, on_step, after_step, ends_row) -> None:
+        sv = self.scene["solver"]
+
+        def step(r) -> None:
+            self.last = r
+            self.cut += r.cutbacks
+            self.newton += r.contact.newton_iterations
+            on_step(StepInfo(time=r.time, dt=r.dt))
+            after_step(self.state_arrays)
+
+        self.dc.run(
+            t_end=self.control.t_end,
+            dt=sv["dt"],
+            dt_min=sv["dt_min"],
+            load=self.control.load,
+            on_step=step,
+        )
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return {
+            **self.dc.state_arrays(),
+            "run_cut": np.array(self.cut),
+            "run_newton": np.array(self.newton),
+        }
+
+    def body_forces(self) -> BodyForces:
+        nodes, body, f_pairs, _ = self.contact.pair_forces()  # per (node, ellipsoid) pair
+        n = self.contact.n
+        x = self.X[nodes] + self.model.u.x.array[: 3 * n].reshape(n, 3)[nodes]
+        return BodyForces(x=x, force_on_body=-f_pairs, body=body, nodes=nodes)
+
+    def pressure(self) -> np.ndarray:
+        return self.contact.state().pressure  # collective (areas)
+
+    def row(self, *, frame: bool) -> dict[str, float]:
+        r, cr = self.last, self.last.contact
+        tm = {k: self.contact.timers[k] - self.timers[k] for k in self.timers}
+        self.timers.update(self.contact.timers)
+        return {
+            "load_factor": float(self.model.lam.value),
+            "n_active": cr.n_active,
+            "max_penetration": cr.max_penetration,
+            "min_multiplier": cr.min_multiplier,
+            "complementarity": cr.complementarity,
+            "sum_lam": cr.total_normal_force,
+            "n_stick": cr.n_stick,
+            "n_slip": cr.n_slip,
+            "cutbacks": r.cutbacks,
+            "active_set_iterations": cr.active_set_iterations,
+            "newton_iterations": cr.newton_iterations,
+            "kinetic_energy": r.kinetic_energy,
+            "strain_energy": r.strain_energy,
+            "dissipation_total": self.contact.dissipation_total,
+            "t_assembly": tm["assembly"],
+            "t_contact": tm["contact"],
+            "t_solve": tm["solve"],
+        }
+
+    def summary(self) -> dict[str, Any]:
+        return {"cutbacks": self.cut, "newton_iterations": self.newton}
+
+    def progress(self) -> str:
+        r, cr = self.last, self.last.contact
+        return (
+            f"dt {r.dt:.2e}  cut {r.cutbacks}  active {cr.n_active}  newton {cr.newton_iterations}"
+        )
+
+
+INTEGRATORS: dict[str, type] = {"explicit": _Explicit, "newmark": _Newmark}
+
+
+class _Run:
+    """The runner's loop body: measures, rows, fields, checkpoints, progress and stop checks
+    of any :class:`Integrator` (see :func:`run_dynamic`)."""
+
+    def __init__(self, scene, out: Path, *, model, comm, plan, control, integ, data, t0,
+                 check_stop, summary):  # fmt: skip
+        motions = plan.motions
+        self.plan, self.control = plan, control
+        self.scene, self.out, self.model, self.comm = scene, out, model, comm
+        self.integ, self.t0, self.check_stop, self.summary = integ, t0, check_stop, summary
+        self.n = model.n_owned
+        self.c = _Counters.from_arrays(data) if data is not None else _Counters()
+        self.fixed = plan.measure.fixed_mask(integ.X) if plan.measure is not None else None
+        self.table = None  # the [[torques]] measures (a body is required by the validation)
+        if scene["torques"]:
+            self.table = TorqueTable(
+                scene, motions, integ.X, aj_mask=_aj_mask, centre=torque_centre
+            )
+        hinge = _measured_hinge(motions, plan.k_torque)
+        self.work = _JointWork(
+            hinge, plan.k_torque, plan.hinge_axis, plan.t_settle, integ.impulsive
+        )
+        if data is not None:
+            self.work.restore(data)
+        self.local = np.zeros(10)  # the row's torque (3), resultant (3), flexion, steps
+        self.pressure = None  # Pa, nodal (multipliers / reference lumped area)
+        if scene["body"]:
+            S = fem.FunctionSpace(model.mesh, model.V.ufl_element().sub_elements()[0])
+            self.pressure = fem.Function(S, name="contact_pressure")
+        self.t_row = time.perf_counter()
+        self.t_last = self.c.time  # of the last accepted step [s]
+        self.due = False  # a checkpoint after this step
+
+    def ends_row(self, t: float) -> bool:
+        """Whether the step to ``t`` ends a history row (every step of a non-impulsive
+        integrator; else one per ``output.interval`` and the last step)."""
+        if not self.integ.impulsive:
+            return True
+        interval = self.scene["output"]["interval"]
+        return t >= (self.c.row + 1) * interval - 1e-12 or t >= self.plan.t_end - 1e-12
+
+    def fields(self) -> tuple[fem.Function, ...]:
+        """The fields written besides the displacement (collective: the pressure's areas)."""
+        if self.pressure is None:
+            return ()
+        self.pressure.x.array[: self.n] = self.integ.pressure()
+        self.pressure.x.scatter_forward()
+        return (self.pressure,)
+
+    def snapshot(self, tag: str, t: float) -> None:
+        """``snapshot_<tag>.png`` of the state at ``t`` (collective)."""
+        self.fields()
+        bodies = self.control.bodies_at(t)[0] if self.scene["body"] else []
+        _snapshot(self.scene, self.model, self.out, self.comm, tag, bodies, pressure=self.pressure)
+
+    def on_step(self, info: StepInfo, writer: ResultWriter, progress: Progress) -> None:
+        self.model.commit_material()  # the step is accepted: material histories to x_n+1
+        self.c.step += 1
+        self.t_last = info.time
+        forces = self.integ.body_forces()
+        if forces is not None:
+            self._measure(info, forces)
+        self.local[9] += 1
+        if self.ends_row(info.time):
+            self._row(info, writer, progress)
+
+    def _measure(self, info: StepInfo, forces: BodyForces) -> None:
+        fixed = self.fixed
+        if fixed is not None and forces.nodes is not None:
+            fixed = fixed[forces.nodes]
+        f, m = forces, self.plan.measure
+        tau, flex = m.local(t=info.time, x=f.x, force_on_body=f.force_on_body, body=f.body,
+                            fixed=fixed)  # fmt: skip
+        self.local[:3] += tau
+        self.local[3:6] += f.force_on_body.sum(axis=0)
+        self.local[6] += flex
+        if self.table is not None:
+            self.table.add(
+                t=info.time, x=f.x, force_on_body=f.force_on_body, body=f.body, nodes=f.nodes
+            )
+        self.work.add(t=info.time, dt=info.dt, forces=f)
+
+    def _reduce(self) -> tuple[np.ndarray, np.ndarray, float, int, np.ndarray]:
+        """The row's torque, resultant and flexion (means over its steps), its step count and
+        the joint work's reduced parts (one reduction per row)."""
+        sums = np.concatenate([self.local, self.work.local])
+        self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+        k = int(self.local[9])
+        steps = max(k, 1)
+        self.local[:] = 0.0
+        tau, res, flex = sums[:3] / steps, sums[3:6] / steps, float(sums[6]) / steps
+        return tau, res, flex, k, sums[10:]
+
+    def _row(self, info: StepInfo, writer: ResultWriter, progress: Progress) -> None:
+        t, c, o = info.time, self.c, self.scene["output"]
+        frame = (c.row + 1) % o["every"] == 0 or t >= self.plan.t_end - 1e-12  # and the last
+        integ_row = self.integ.row(frame=frame)  # collective
+        c.row += 1
+        tau, res, flex, k, work_parts = self._reduce()
+        work = self.work.close_row(work_parts, t)
+        if self.table is not None:
+            rows = self.table.rows(comm=self.comm, steps=k, increment=c.row, time=t)
+            append_torques(self.out, rows, self.comm)
+        angle = self.plan.angle_at(t)
+        tio = time.perf_counter()
+        if frame:
+            writer.write_fields(t, self.fields())
+        t_io = time.perf_counter() - tio
+        now = time.perf_counter()
+        row = {
+            "stage": "settle" if t <= self.plan.t_settle + 1e-12 else "motion",
+            "increment": c.row,
+            "time": t,
+            "dt": info.dt,
+            "angle_deg": angle,
+            **_torque_columns(tau, res, flex),
+            **({"substeps": k} if self.integ.impulsive else {}),
+            **yarn_strain_columns(self.model),
+            "joint_work": work,
+            "dissipation_material": self.model.dissipated_material(),
+            **integ_row,
+            "t_io": t_io,
+            "wall_time": now - self.t_row,
+            "elapsed": now - self.t0,
+        }
+        self.t_row = now
+        c.pen, c.time = max(c.pen, row["max_penetration"]), t
+        writer.append_row(row)
+        every = o["checkpoint_every"]
+        self.due = bool(every) and c.row % every == 0
+        self.summary.update(final_angle_deg=angle, time=t, steps=c.step, max_penetration=c.pen)
+        self.summary.update(self.integ.summary())
+        self._progress(row, progress)
+        c.snap = _progress_snapshots(self.plan, c.snap, row["stage"], angle,
+                                     lambda tag: self.snapshot(tag, t), t=t)  # fmt: skip
+        where = f"row {c.row} (t = {t:.6g} s)"
+        _stop_with_fields(self.check_stop, where, writer, t, self.fields)
+
+    def _progress(self, row: dict[str, Any], progress: Progress) -> None:
+        t, end = row["time"], self.plan.t_end
+        head = f"t {t:7.4f} s  "
+        if self.scene["body"]:
+            head += f"angle {row['angle_deg']:6.2f} deg  |tau| {row['torque_mag']:.4f} N m  "
+        frac = min(max(t / end, 0.0), 1.0) if end > 0 else 1.0
+        progress.update(
+            frac, head + self.integ.progress() + f"  row {self.c.row}  steps {self.c.step}"
+        )
+
+    def after_step(self, arrays: Callable[[], dict[str, np.ndarray]]) -> None:
+        """Checkpoint the state when the last row asked for it."""
+        if self.due:
+            self.due = False
+            data = {**arrays(), **self.c.arrays(), **self.work.arrays()}
+            save_checkpoint(self.out, self.comm, data)
+
+
+def run_dynamic(
+    scene: dict[str, Any],
+    out: Path,
+    *,
+    model: ShellModel,
+    comm: MPI.Comm,
+    t0: float,
+    check_stop: Callable[[str], None],
+    resume: bool,
+    summary: dict[str, Any],
+) -> Path:
+    """Run a dynamic scene (``solver.integrator`` explicit or newmark) from t = 0 or, with
+    ``resume``, from the checkpoint in ``out``; write ``history.csv``, ``fabric.xdmf``,
+    snapshots, plots and the animation to ``out`` (see the module docstring).
+    ``check_stop(where)`` is called after every row (raises to stop the run); ``summary`` is
+    updated as the run goes. Raises :class:`SolverDivergence` when the integrator fails
+    (the rows and fields written so far are kept, with a snapshot of the last state)."""
+    _write_events(scene, out, comm, summary)
+    plan = _plan(scene, body_motions(scene))
+    control = control_from_scene(scene, plan.motions, plan.t_end)
+    data = load_checkpoint(out, comm) if resume else None
+    integ = INTEGRATORS[scene["solver"]["integrator"]](scene, model, control, comm, data=data)
+    run = _Run(scene, out, model=model, comm=comm, plan=plan, control=control, integ=integ,
+               data=data, t0=t0, check_stop=check_stop, summary=summary)  # fmt: skip
+    keep, after = (run.c.row, run.c.time) if resume else (None, None)
+    if resume:
+        rank0_print(f"  resumed from the checkpoint at t = {run.c.time:.6g} s (row {keep})")
+        if run.table is not None:
+            keep_torque_rows(out, keep, comm)
+    model.u.name = "displacement"
+    end, name = plan.t_end, scene["scene"]["name"]
+    progress = Progress(
+        label=name, comm=comm, start=min(max(run.c.time / end, 0.0), 1.0) if end > 0 else 0.0
+    )
+    with ResultWriter(out, model, keep_rows=keep, resume_after=after) as writer:
+        try:
+            integ.run(
+                on_step=lambda info: run.on_step(info, writer, progress),
+                after_step=run.after_step,
+                ends_row=run.ends_row,
+            )
+            run.snapshot("final", end)
+        except integ.failures as exc:
+            t, angle = run.t_last, plan.angle_at(run.t_last)
+            run.snapshot(f"stopped_{angle:04.1f}deg", t)
+            raise SolverDivergence(
+                f"{integ.label} stopped at t = {t:.6g} s ({angle:.2f} deg): {exc}"
+            ) from None
+        finally:
+            progress.close()
+            _end_together(comm)
+            if scene["output"]["png"] and comm.rank == 0 and writer.csv_path.exists():
+                _plots(scene, out, writer.csv_path, summary, control)
+    return out
+
+
+def _plots(scene, out: Path, csv_path: Path, summary, control: Control) -> None:
+    """The torque plots and the animation of a run (rank 0)."""
+    name, events = scene["scene"]["name"], _events(summary)
+    if scene["body"]:
+        _torque_plot(csv_path, out / "torque_angle.png", name, events)
+    if scene["torques"]:
+        k = torque_segment_index(scene)
+        primary = scene["body"][k]["name"] if k is not None else "[contact]"
+        plot_torques(out, out / "torques.png", primary=primary, title=name, events=events)
+    _animation(scene, out, lambda t: control.bodies_at(t)[0])
