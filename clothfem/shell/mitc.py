@@ -45,6 +45,7 @@ import numba
 import numpy as np
 from dolfinx import cpp as _cpp
 from dolfinx import fem
+from numba.extending import intrinsic
 
 __all__ = ["MitcForms", "tying_tables"]
 
@@ -395,38 +396,38 @@ def _law(L, const, coef, qp, sig, tan):
 
 
 @numba.njit(cache=True)
-def _geometric(K, s, mode, tabs):
-    """K += sum_k s_k d2 e_k / d(row) d(col) for the block of ``mode`` (identity in the
-    three components)."""
-    if mode == K_DD:
-        return
+def _geometric(K, s, tabs):
+    """K (54 x 54, the columns of :func:`_strain_derivatives`) += sum_k s_k d2 e_k / d(u,
+    d)^2: node matrices (9 x 9) of the u-u and u-d terms (e is linear in d), times the
+    identity in the three components."""
     off, _ = _offsets(tabs[2][0], tabs[2][1], tabs[2][2])
+    Guu, Gud = np.zeros((9, 9)), np.zeros((9, 9))
     for k in range(3):
         N, dN = tabs[3][k], tabs[4][k]
         for p in range(N.shape[0]):
+            se = s[off[k] + p] * (0.5 if k == 2 else 1.0)
+            sg = s[off[3 + k] + p] if k < 2 else 0.0
             for a in range(9):
                 for b in range(9):
-                    if mode == K_UU:
-                        if k == 2:
-                            v = 0.5 * (dN[p, a, 0] * dN[p, b, 1] + dN[p, a, 1] * dN[p, b, 0])
-                            v *= s[off[2] + p]
-                        else:
-                            v = s[off[k] + p] * dN[p, a, k] * dN[p, b, k]
-                    elif k == 2:
-                        continue
-                    elif mode == K_UD:
-                        v = s[off[3 + k] + p] * dN[p, a, k] * N[p, b]
-                    else:  # K_DU: row d_a, column u_b
-                        v = s[off[3 + k] + p] * N[p, a] * dN[p, b, k]
-                    for c in range(3):
-                        K[3 * a + c, 3 * b + c] += v
+                    if k == 2:
+                        Guu[a, b] += se * (dN[p, a, 0] * dN[p, b, 1] + dN[p, a, 1] * dN[p, b, 0])
+                    else:
+                        Guu[a, b] += se * dN[p, a, k] * dN[p, b, k]
+                        Gud[a, b] += sg * dN[p, a, k] * N[p, b]
+    for a in range(9):
+        for b in range(9):
+            for c in range(3):
+                K[3 * a + c, 3 * b + c] += Guu[a, b]
+                K[3 * a + c, 27 + 3 * b + c] += Gud[a, b]
+                K[27 + 3 * b + c, 3 * a + c] += Gud[a, b]
 
 
 @numba.njit(cache=True)
 def _cell(out, coef, const, coords, mode, tabs):
-    """One output of a cell: its membrane or shear energy, the residual (u_a, d_a node by
-    node) or a Jacobian block (``mode``), added to ``out``. ``tabs``: (w, dNq, (P0, P1,
-    P2), (N0, N1, N2), (dN0, dN1, dN2)) of :func:`tying_tables`."""
+    """One output of a cell (``mode``): its membrane or shear energy or the residual (u_a,
+    d_a node by node), added to ``out``, or for any Jacobian mode the whole 54 x 54 matrix,
+    written to ``out`` (:func:`_jacobian`). ``tabs``: (w, dNq, (P0, P1, P2), (N0, N1, N2),
+    (dN0, dN1, dN2)) of :func:`tying_tables`."""
     w, Ps = tabs[0], tabs[2]
     sets = (0, 1, 2, 0, 1)  # the tying set of each component (e_rr, e_ss, e_rs, g_r, g_s)
     off, ne = _offsets(Ps[0], Ps[1], Ps[2])
@@ -496,15 +497,20 @@ def _cell(out, coef, const, coords, mode, tabs):
     elif mode == R_UD:
         _add_residual(out, s, xr, xs, dd, tabs)
     else:
-        B = _strain_derivatives(xr, xs, dd, tabs)
-        ra = 0 if mode in (K_UU, K_UD) else 27
-        ca = 0 if mode in (K_UU, K_DU) else 27
-        Br = np.ascontiguousarray(B[:, ra : ra + 27].T)
-        K = Br @ (DD @ np.ascontiguousarray(B[:, ca : ca + 27]))
-        _geometric(K, s, mode, tabs)
-        for i in range(27):
-            for j in range(27):
-                out[27 * i + j] += K[i, j]
+        _jacobian(out.reshape(54, 54), s, DD, xr, xs, dd, tabs)
+
+
+@numba.njit(cache=True)
+def _jacobian(K, s, DD, xr, xs, dd, tabs):
+    """Writes the cell's Jacobian to K (54 x 54, the columns of :func:`_strain_derivatives`
+    in rows and columns): B^T DD B plus the geometric terms. DD is block diagonal (membrane
+    rows, then shear rows) and the membrane rows of B have no d columns."""
+    B = _strain_derivatives(xr, xs, dd, tabs)
+    m = _offsets(tabs[2][0], tabs[2][1], tabs[2][2])[0][3]
+    Bm, Bs = np.ascontiguousarray(B[:m, :27]), np.ascontiguousarray(B[m:])
+    K[:, :] = Bs.T @ (np.ascontiguousarray(DD[m:, m:]) @ Bs)
+    K[:27, :27] += Bm.T @ (np.ascontiguousarray(DD[:m, :m]) @ Bm)
+    _geometric(K, s, tabs)
 
 
 _SIGNATURE = numba.types.void(
@@ -534,13 +540,52 @@ _TABS_MITC9, _TABS_FULL = _TABS["mitc9"], _TABS["full"]
 #: constants, after the model's 15 (Q, kG, t, warp); then the material terms of
 #: :func:`_law` (decrimping 6, friction 4, viscosity 3 and 1 / h) and the layout: LAW (1 if
 #: any term), the offsets of the friction and viscosity histories among the coefficients
-#: (-1: none).
-MODE, TYING, LAW = 15, 16, 31
-N_CONST = 34
+#: (-1: none), CELL the offset of the local cell number (the last coefficient) and CACHE the
+#: address of the Jacobian cache (:attr:`MitcForms.K`; an address is below 2^53, exact).
+MODE, TYING, LAW, CELL, CACHE = 15, 16, 31, 34, 35
+N_CONST = 36
 #: The coefficients: u, d, D (27 each), the point stiffness (81); with material terms the
 #: point frames (10 a point, :func:`_cell_frames`), the friction history (4 a point) and the
-#: viscosity history (3 a point) where present.
-N_COEF = 162 + 90 + 36 + 27
+#: viscosity history (3 a point) where present; the local cell number.
+N_COEF = 162 + 90 + 36 + 27 + 1
+
+
+@intrinsic
+def _pointer(typingctx, address):
+    """The float64 pointer of an integer address."""
+    sig = numba.types.CPointer(numba.types.float64)(numba.types.int64)
+
+    def codegen(context, builder, signature, args):
+        return builder.inttoptr(args[0], context.get_value_type(signature.return_type))
+
+    return sig, codegen
+
+
+@numba.njit(cache=True)
+def _cache_entry(coef, const, coords):
+    """The cell's Jacobian in the cache (54 x 54 flat, :func:`_jacobian`) and whether it is
+    that of the kernel's inputs. A cell's entry is its key, the inputs (coefficients,
+    constants but the mode, coordinates), then the Jacobian; a key that differs in any bit
+    is replaced by the inputs', for the Jacobian to be recomputed."""
+    n = int(const[CELL]) + 1
+    key = np.concatenate((coef[:n], const, coords))
+    key[n + MODE] = 0.0
+    address = int(const[CACHE]) + 8 * (key.size + 54 * 54) * int(coef[n - 1])
+    old = numba.carray(_pointer(address), (key.size,))
+    K = numba.carray(_pointer(address + 8 * key.size), (54 * 54,))
+    if np.array_equal(old.view(np.int64), key.view(np.int64)):
+        return K, True
+    old[:] = key
+    return K, False
+
+
+@numba.njit(cache=True)
+def _compute(out, coef, const, coords, mode):
+    """:func:`_cell` with the tables of the form's tying scheme."""
+    if const[TYING] == 0.0:
+        _cell(out, coef, const, coords, mode, _TABS_MITC9)
+    else:
+        _cell(out, coef, const, coords, mode, _TABS_FULL)
 
 
 @numba.cfunc(_SIGNATURE, nopython=True, cache=True)
@@ -548,16 +593,22 @@ def _kernel(A_, w_, c_, coords_, local_index, permutation):
     """The dolfinx cell kernel of every output of :func:`_cell`: the output (``mode``) and
     the tying scheme come in the form's constants, so one compiled function (cached on
     disk) serves all forms. ``A_`` is viewed at the largest element tensor's size; each
-    output writes only its own entries."""
+    output writes only its own entries. A Jacobian block is copied from the cell's whole
+    Jacobian in the cache, computed when the kernel's inputs changed."""
     const = numba.carray(c_, (N_CONST,))
     out = numba.carray(A_, (27 * 27,))
     coef = numba.carray(w_, (N_COEF,))
     coords = numba.carray(coords_, (27,))
     mode = int(const[MODE])
-    if const[TYING] == 0.0:
-        _cell(out, coef, const, coords, mode, _TABS_MITC9)
-    else:
-        _cell(out, coef, const, coords, mode, _TABS_FULL)
+    if mode < K_UU:
+        _compute(out, coef, const, coords, mode)
+        return
+    K, cached = _cache_entry(coef, const, coords)
+    if not cached:
+        _compute(K, coef, const, coords, mode)
+    first = 54 * 27 * ((mode - K_UU) // 2) + 27 * ((mode - K_UU) % 2)  # the block's K[0, 0]
+    for i in range(27):
+        out[27 * i : 27 * i + 27] += K[first + 54 * i : first + 54 * i + 27]
 
 
 class MitcForms:
@@ -577,7 +628,8 @@ class MitcForms:
     ``friction`` a :class:`~clothfem.shell.hysteresis.YarnFriction` and ``viscosity`` a
     :class:`~clothfem.shell.viscosity.MembraneViscosity`, both with their history on the
     rule of degree 4 (the 3 x 3 points); their constants (e.g. the viscosity's 1 / h) are
-    read at every assembly.
+    read at every assembly. The Jacobian forms use a cache of this object (:attr:`K`): it
+    must outlive their use.
     """
 
     def __init__(
@@ -626,10 +678,15 @@ class MitcForms:
                 if history.history.x.array.size != dim * 9 * n_cells:
                     raise ValueError("the MITC9 material history needs the 3 x 3 points a cell")
                 coefficients.append(history.history)
+        cell = fem.Function(fem.FunctionSpace(mesh, ("DG", 0)), name="mitc_cell")
+        cell_dofs = cell.function_space.dofmap.list.array[:n_cells]
+        cell.x.array[cell_dofs] = np.arange(n_cells)  # the kernels' index into the cache
+        coefficients.append(cell)
         coeffs = [f._cpp_object for f in coefficients]
         consts = [c._cpp_object for c in (Q, kG, t, warp)]
         scheme = fem.Constant(mesh, float(list(_TABS).index(tying)))
         self._constants = [scheme, *law, layout]  # kept alive with the forms
+        self._layout, self._n_cells, self._cache = layout, n_cells, None
 
         def form(mode: int, spaces: list):
             self._constants.append(fem.Constant(mesh, float(mode)))
@@ -645,15 +702,29 @@ class MitcForms:
         # the residual node by node, (u_a, d_a): one kernel call per cell
         self.V6 = fem.VectorFunctionSpace(mesh, (V.ufl_element().family(), 2), dim=6)
         self.R = form(R_UD, [self.V6])
-        self.K = [
+        self._K = [
             [form(K_UU, [V, V]), form(K_UD, [V, V])],
             [form(K_DU, [V, V]), form(K_DD, [V, V])],
         ]
 
+    @property
+    def K(self) -> list[list]:
+        """The Jacobian blocks [[K_uu, K_ud], [K_du, K_dd]]. Their kernel computes a cell's
+        whole Jacobian (54 x 54) and keeps it, with its inputs, in a cache allocated here at
+        the first use (cells x (inputs + 54 x 54) values): a block assembled after another
+        at the same state (e.g. by ``assemble_matrix_block``) is a copy."""
+        if self._cache is None:
+            n_key = int(self._layout.value[CELL - LAW]) + 1 + N_CONST + 27
+            self._cache = np.full((self._n_cells, n_key + 54 * 54), np.nan)
+            layout = self._layout.value.copy()
+            layout[CACHE - LAW] = self._cache.ctypes.data
+            self._layout.value = layout
+        return self._K
+
     @staticmethod
     def _law_constants(mesh, yarn, friction, viscosity) -> tuple[list, fem.Constant]:
         """The constants of :func:`_law` (zeros for an absent term) and the layout
-        (LAW, friction offset, viscosity offset)."""
+        (LAW, friction offset, viscosity offset, cell number offset, cache address 0)."""
         law = [
             yarn if yarn is not None else fem.Constant(mesh, np.zeros((2, 3))),
             friction.k if friction is not None else fem.Constant(mesh, np.zeros((2, 2))),
@@ -665,7 +736,7 @@ class MitcForms:
         for history, dim in ((friction, 4), (viscosity, 3)):
             layout.append(float(offset) if history is not None else -1.0)
             offset += 9 * dim if history is not None else 0
-        return law, fem.Constant(mesh, np.array(layout))
+        return law, fem.Constant(mesh, np.array([*layout, float(offset), 0.0]))
 
     def _coords(self, n_cells: int) -> np.ndarray:
         """The node coordinates of the first ``n_cells`` local cells, (n_cells, 27)."""
