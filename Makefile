@@ -48,15 +48,12 @@ demo-body: env
 demo-contact: env
 	$(PY) demos/contact_push.py --out $(OUT)/contact_push
 
-## make demo-pants: pants donned onto the recorded lower body (particle model), then the walk
-## with 1 mm and 2 mm cotton on 2 ranks and their right-knee torques (docs/results/pants_walk.md)
-PANTS_CELLS ?= --n-around 16 --n-along 16
+## make demo-pants: pants donned onto the recorded lower body (particle model) and walked,
+## 1 mm and 2 mm cotton on 2 ranks, and their right-knee torques (docs/results/pants_walk.md)
 demo-pants: env
-	$(PY) -m clothfem.particle.donning --out $(OUT)/pants-donned --overwrite $(PANTS_CELLS)
 	for t in 1 2; do \
 		$(MPIRUN) .venv/bin/clothfem run demos/scenes/pants_walk.toml --out $(OUT)/pants-walk-$${t}mm \
-			--overwrite --set initial.positions=$(OUT)/pants-donned/donned.npz \
-			--set material.thickness=$${t}e-3 || exit 1; \
+			--overwrite --set material.thickness=$${t}e-3 || exit 1; \
 	done
 	.venv/bin/clothfem plot $(OUT)/pants-walk-1mm $(OUT)/pants-walk-2mm --label "1 mm" "2 mm" \
 		--x time --y torque_flex --title "right knee, pants on walking legs" \

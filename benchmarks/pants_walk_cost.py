@@ -58,7 +58,7 @@ def _walk(
     out: Path, donned: Path, mesh: tuple[int, int], settle: float, walk: float, selfc: bool
 ) -> dict:
     """The short run; its row of the table."""
-    sets = [f"initial.positions='{donned}'", f"mesh.n_around={mesh[0]}"]
+    sets = ["initial.don=false", f"initial.positions='{donned}'", f"mesh.n_around={mesh[0]}"]
     sets += [f"contact.self_contact={'true' if selfc else 'false'}"]
     sets += [f"mesh.n_along={mesh[1]}", "output.png=false", "output.checkpoint_every=0"]
     t_full = scenes.load(SCENE, sets)["solver"]["settle_time"] + 2.2

@@ -22,6 +22,8 @@ import math
 import os
 import signal
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -53,7 +55,7 @@ from .shell import (
     Symmetry,
 )
 from .simulation import run_dynamic
-from .static import LoadStepping, solve_static
+from .static import LoadStepping, SolverDivergence, solve_static
 from .torque_measure import torque_segment_index
 from .torque_table import FILE as TORQUE_FILE
 from .torque_table import torque_stats
@@ -86,7 +88,10 @@ RUN_FILES = (
     "events.csv",
     "torques.csv",
     "torques.png",
+    "donned.npz",
+    "donning_log.txt",
 )
+DONNED = "donned.npz"
 CHECKPOINT_FILES = ("rank*-of-*.npz", "rank*-of-*.tmp")
 
 
@@ -327,32 +332,41 @@ def _material_line(mat: dict[str, Any]) -> str:
     return line
 
 
-def _initial_state(scene: dict[str, Any], model: ShellModel) -> str:
-    """Start ``model`` from ``initial.positions`` (collective); the log line."""
+def _initial_state(
+    scene: dict[str, Any], model: ShellModel, start: tuple[np.ndarray, np.ndarray, str] | None
+) -> str:
+    """Start ``model`` from ``start`` (X, x, what) or ``initial.positions`` (collective); the
+    log line."""
     from .initial_state import displacement_at_nodes, read_positions
 
     path = scene["initial"]["positions"]
-    if path is None:
+    if start is None and path is None:
         return "initial state: the mesh at rest"
-    X, x = read_positions(Path(path))
+    X, x, what = start if start is not None else (*read_positions(Path(path)), Path(path).name)
+    key = "initial.don" if start is not None else "initial.positions"
     try:
         u = displacement_at_nodes(nodes=model.x_nodes, X=X, x=x)
         model.start_at(u)
     except ValueError as exc:
-        raise SceneError(f"scene key 'initial.positions': {exc}") from None
+        raise SceneError(f"scene key '{key}': {exc}") from None
     umax = model.comm.allreduce(float(np.abs(u).max(initial=0.0)), op=MPI.MAX)
     lo, hi = model.yarn_strain_range()
     return (
-        f"initial state: the positions of {Path(path).name} (reference: the mesh; max "
+        f"initial state: the positions of {what} (reference: the mesh; max "
         f"displacement component {umax:.4g} m; directors turned with their neighbourhoods; "
         f"yarn Green strains {lo:.3g} .. {hi:.3g} at the start)"
     )
 
 
 def build_model(
-    scene: dict[str, Any], comm: MPI.Comm = MPI.COMM_WORLD
+    scene: dict[str, Any],
+    comm: MPI.Comm = MPI.COMM_WORLD,
+    *,
+    start: tuple[np.ndarray, np.ndarray, str] | None = None,
 ) -> tuple[ShellModel, list[str]]:
-    """The shell model of a scene and a log of what was built and left out."""
+    """The shell model of a scene and a log of what was built and left out; ``start``:
+    (X, x, what) node positions to start from instead of ``initial.positions`` (the
+    donning's)."""
     sm = build_mesh(scene, comm)
     mat = scene["material"]
     material = build_material(mat)
@@ -373,7 +387,7 @@ def build_model(
     )
     n_nodes = comm.allreduce(model.n_owned, op=MPI.SUM)
     n_cells = comm.allreduce(sm.mesh.topology.index_map(2).size_local, op=MPI.SUM)
-    start = _initial_state(scene, model)
+    started = _initial_state(scene, model, start)
     log = [
         f"mesh: {scene['mesh']['generator']}, {n_cells} {scene['mesh']['cell']} cells "
         f"(order {scene['mesh']['order']}, u and theta of degree {scene['element']['degree']}), "
@@ -383,7 +397,7 @@ def build_model(
         "supports: "
         + (", ".join(f"{s['type']} on {s['where']}" for s in scene["supports"]) or "none"),
         "loads: " + (", ".join(ld["type"] for ld in scene["loads"]) or "none"),
-        start,
+        started,
         _inertia_log(scene["solver"]),
         (
             "linear solves: none (explicit: lumped mass)"
@@ -433,6 +447,58 @@ def _inertia_log(sv: dict[str, Any]) -> str:
         f"inertia: consistent mass, Newmark gamma {sv['gamma']:g}, dt {sv['dt']:g} s, "
         f"rotary inertia x {sv['rotary_scale']:g}"
     )
+
+
+@dataclass(frozen=True)
+class _Donned:
+    """The donning stage's result: ``start`` (X, x, what) for :func:`build_model`, its
+    checks (:func:`clothfem.particle.donning.summary`; None when a resumed run reads its
+    donned.npz) and ``write()`` (collective: donned.npz and donning_log.txt into the run's
+    folder, once it is cleared)."""
+
+    start: tuple[np.ndarray, np.ndarray, str]
+    summary: dict[str, Any] | None
+    write: Callable[[], None]
+
+
+def _don(scene: dict[str, Any], out: Path, comm: MPI.Comm, *, resume: bool) -> _Donned:
+    """The donning of ``initial.don`` (rank 0 computes, every rank gets the positions); a
+    resumed run reads the donned.npz it wrote."""
+    from .initial_state import read_positions
+    from .particle import donning
+    from .particle.scene_donning import don_scene
+
+    path = out / DONNED
+    if resume and comm.bcast(path.is_file() if comm.rank == 0 else None, root=0):
+        X, x = read_positions(path)
+        return _Donned((X, x, f"{DONNED} of this run"), None, lambda: None)
+    rank0_print("donning (particle model, docs/donning.md)")
+    progress, d, error = Progress(label="donning", comm=comm), None, None
+    try:
+        d = don_scene(scene, comm=comm, progress=progress)
+    except (FloatingPointError, ValueError) as exc:  # rank 0's: every rank stops below
+        error = f"{type(exc).__name__}: {exc}"
+    finally:
+        progress.close()
+    error = comm.bcast(error, root=0)
+    if error is not None:
+        raise SolverDivergence(f"the donning stopped: {error}")
+    summ = donning.summary(d, tol=1e-6) if d is not None else None
+    X, x, summ = comm.bcast((d.network.x0, d.result.x, summ) if d is not None else None, root=0)
+    rank0_print(
+        f"  donned: {summ['nodes']} nodes, {summ['steps']} steps, {summ['wall_seconds']:.1f} s; "
+        f"min gap {1e3 * summ['min_gap']:.3f} mm ({summ['inside_end']} nodes inside, "
+        f"{summ['pushed_out_nodes']} pushed out); structural strain "
+        f"{summ['strain_min_structural']:.3f} .. {summ['strain_max_structural']:.3f}; "
+        f"{summ['self_intersections']} intersecting triangle pairs"
+    )
+
+    def write() -> None:
+        if comm.rank == 0:
+            donning.write_donned(out, d, summ, {"scene": scene["scene"]["name"]})
+        comm.barrier()
+
+    return _Donned((X, x, "the donning"), summ, write)
 
 
 def _write_summary(out: Path, summary: dict[str, Any], comm: MPI.Comm) -> None:
@@ -497,9 +563,12 @@ def run_scene(
     check_output(out, overwrite=overwrite, resume=resume, comm=comm)
     _check_mesh_file(scene, comm)
     t0 = time.perf_counter()
-    model, log = build_model(scene, comm)
+    donned = _don(scene, out, comm, resume=resume) if scene["initial"]["don"] else None
+    model, log = build_model(scene, comm, start=donned.start if donned else None)
     if overwrite:
         clear_output(out, comm=comm)
+    if donned is not None:
+        donned.write()
     rank0_print(f"scene {scene['scene']['name']!r}")
     for line in log:
         rank0_print("  built " + line if "not built" not in line else "  " + line)
@@ -524,6 +593,8 @@ def run_scene(
 
         summary: dict[str, Any] = {"scene": scene["scene"]["name"], "completed": False}
         summary["built"] = log  # what the run built and left out (e.g. a repeated gait cycle)
+        if donned is not None:
+            summary["donning"] = donned.summary
         try:
             if s["integrator"] == "static":
                 run_contact_scene(

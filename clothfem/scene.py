@@ -775,8 +775,57 @@ SCHEMA: dict[str, Section] = {
                 "directors follow the deformed surface (relative paths: from the working "
                 "folder, else the scene file's folder)",
             ),
+            "don": Key(
+                "bool",
+                "don the pants onto the body's pose at the start of its window with the "
+                "particle model first ([donning]; docs/donning.md) and start from the donned "
+                "positions (written to donned.npz): needs mesh.generator = 'pants' and the "
+                "seven segments of clothfem.body.lower_body from one C3D file; the pants "
+                "dimensions left out of [mesh] are the donning fit's",
+                default=False,
+            ),
         },
         "the state a run starts from (default: the mesh at rest)",
+        optional=True,
+    ),
+    "donning": Section(
+        {
+            "ease": Key("float", "radial ease of the fitted pants [m]", default=0.015, **POS),
+            "waist_height": Key(
+                "float",
+                "waist above the hip line, as a fraction of the pelvis's vertical radius",
+                default=0.5,
+                lo=0.0,
+                hi=0.9,
+            ),
+            "start_scale": Key(
+                "float",
+                "the ellipsoids' radius scale at the start of the growth",
+                default=0.3,
+                lo=0.0,
+                hi=1.0,
+                open_lo=True,
+            ),  # fmt: skip
+            "grow_time": Key(
+                "float", "time the ellipsoids grow to full size [s]", default=0.4, **POS
+            ),
+            "settle_time": Key(
+                "float", "relaxation at full size after the growth [s]", default=0.2, lo=0.0
+            ),
+            "alpha": Key("float", "mass-proportional damping [1/s]", default=10.0, lo=0.0),
+            "max_stretch": Key(
+                "float", "strain limit of the structural and shear springs [-]", default=0.1, **POS
+            ),
+            "mu": Key("float", "Coulomb friction of the donning contact", default=0.0, lo=0.0),
+            "self_distance": Key(
+                "float",
+                "fabric-fabric contact distance [m] while donning (0: the fabric may pass "
+                "through itself)",
+                default=1e-3,
+                lo=0.0,
+            ),
+        },
+        "the particle donning of initial.don (clothfem.particle.donning; docs/donning.md)",
         optional=True,
     ),
     "output": Section(
@@ -948,6 +997,7 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
     _validate_body(data, out)
     _validate_mocap(out, base=None if base is None else Path(base))
     _validate_initial(out, base=None if base is None else Path(base))
+    _validate_don(data, out)
     _validate_duration(out)
     _validate_torques(out)
     _validate_size(out)
@@ -1053,6 +1103,22 @@ def _validate_initial(out: dict[str, Any], *, base: Path | None) -> None:
             f"positions), got {len(out['supports'])}",
         )
     out["initial"]["positions"] = str(path)
+
+
+def _validate_don(data: dict[str, Any], out: dict[str, Any]) -> None:
+    """``initial.don`` (:func:`clothfem.particle.scene_donning.check_scene`, which fills the
+    pants dimensions from the donning fit); a [donning] table needs it."""
+    if not out["initial"]["don"]:
+        if "donning" in data:
+            _fail("donning", "applies with initial.don = true only")
+        return
+    from .particle.scene_donning import check_scene
+
+    try:
+        check_scene(out)
+    except ValueError as exc:
+        key, _, msg = str(exc).partition(": ")
+        _fail(key, msg)
 
 
 def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:

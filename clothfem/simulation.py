@@ -592,7 +592,8 @@ class _Run:
         )
         if data is not None:
             self.work.restore(data)
-        self.local = np.zeros(10)  # the row's torque (3), resultant (3), flexion, steps
+        self.local = np.zeros(7)  # this rank's torque (3), resultant (3), flexion of the row
+        self.k = 0  # steps in the row
         self.pressure = None  # Pa, nodal (multipliers / reference lumped area)
         if scene["body"]:
             S = fem.FunctionSpace(model.mesh, model.V.ufl_element().sub_elements()[0])
@@ -630,7 +631,7 @@ class _Run:
         forces = self.integ.body_forces()
         if forces is not None:
             self._measure(info, forces)
-        self.local[9] += 1
+        self.k += 1
         if self.ends_row(info.time):
             self._row(info, writer, progress)
 
@@ -655,11 +656,10 @@ class _Run:
         the joint work's reduced parts (one reduction per row)."""
         sums = np.concatenate([self.local, self.work.local])
         self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
-        k = int(self.local[9])
-        steps = max(k, 1)
+        k, self.k = self.k, 0
         self.local[:] = 0.0
-        tau, res, flex = sums[:3] / steps, sums[3:6] / steps, float(sums[6]) / steps
-        return tau, res, flex, k, sums[10:]
+        tau, res, flex = sums[:3] / k, sums[3:6] / k, float(sums[6]) / k
+        return tau, res, flex, k, sums[7:]
 
     def _row(self, info: StepInfo, writer: ResultWriter, progress: Progress) -> None:
         t, c, o = info.time, self.c, self.scene["output"]
@@ -678,7 +678,7 @@ class _Run:
         t_io = time.perf_counter() - tio
         now = time.perf_counter()
         row = {
-            "stage": "settle" if t <= self.plan.t_settle + 1e-12 else "motion",
+            "stage": self.control.stage(t),
             "increment": c.row,
             "time": t,
             "dt": info.dt,

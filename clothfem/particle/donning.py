@@ -1076,7 +1076,8 @@ def _commit() -> str:
         return "unknown"
 
 
-def _write(out: Path, d: PantsDonning, summ: dict, meta: dict) -> None:
+def write_donned(out: Path, d: PantsDonning, summ: dict, meta: dict) -> None:
+    """``out/donned.npz`` (X, x and the checks) and ``out/donning_log.txt``."""
     out.mkdir(parents=True, exist_ok=True)
     mesh = {f"mesh_{k}": v for k, v in d.pattern.geometry.items()}  # [mesh] keys of a scene
     scalars = {k: np.asarray(v) for k, v in {**meta, **mesh, **summ}.items()}
@@ -1122,7 +1123,7 @@ def main(argv: list[str] | None = None) -> int:
         fit=str(asdict(fit)),
         relax=str(asdict(relax)),
     )
-    _write(out, d, summ, meta)
+    write_donned(out, d, summ, meta)
     stretch = max(summ["strain_max_structural"], summ["strain_max_shear"])
     crushed = summ["strain_min_structural"] < -args.strain_check
     inside = summ["inside_end"]

@@ -143,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     out = Path(args.out)
     try:
-        sets = [*args.set, f"initial.positions='{args.donned}'"]
+        sets = [*args.set, "initial.don=false", f"initial.positions='{args.donned}'"]
         scene = scenes.load(Path(args.scene), sets)
         if out.exists() and any(out.iterdir()) and not args.overwrite:
             raise scenes.SceneError(f"--out {out} is not empty (--overwrite to write into it)")

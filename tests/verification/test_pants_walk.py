@@ -1,6 +1,7 @@
 """The pants walk (demos/scenes/pants_walk.toml) at a small size, serially and on 2 ranks:
-the pants donned by the particle model onto the recording's first frame (8 x 6 cells), the
-shell started from the donned positions, 0.1 s of walking after 0.15 s of settling.
+the scene dons the pants with the particle model onto the recording's first frame (8 x 6
+cells) and starts the shell from the donned positions, 0.1 s of walking after 0.15 s of
+settling.
 
 - every node starts the walk outside the body (the donning's check, in donned.npz);
 - the shell starts from the donned positions: the run's log says so, and the fabric is in
@@ -42,12 +43,10 @@ def donned(tmp_path_factory) -> Path:
     return base / "donned.npz"
 
 
-def test_pants_walk_small(tmp_path, donned):
+def test_pants_walk_small(tmp_path):
+    """The scene as shipped (but smaller): it dons the pants itself, then walks."""
     base = Path(COMM.bcast(str(tmp_path) if COMM.rank == 0 else None, root=0))
-    gap = np.load(donned)["gap"]
-    assert gap.min() >= -1e-6  # every node outside the body at the start of the walk
     sets = [
-        f"initial.positions={donned}",
         "mesh.n_around=8",
         "mesh.n_along=6",
         "solver.duration=0.25",
@@ -57,7 +56,10 @@ def test_pants_walk_small(tmp_path, donned):
     out = run_scene(scenes.load(SCENE, sets), base / "walk", comm=COMM)
     COMM.barrier()
     s = read_summary(out)
-    assert s["completed"] and any(x.startswith("initial state: the positions") for x in s["built"])
+    assert s["completed"] and "initial state: the positions of the donning" in " ".join(s["built"])
+    gap = np.load(out / "donned.npz")["gap"]
+    assert gap.min() >= -1e-6  # every node outside the body at the start of the walk
+    assert s["donning"]["inside_end"] == 0 and s["donning"]["self_intersections"] == 0
     first = [e for e in s["gait_events"] if e["label"] == "Foot Strike"][0]
     assert first["context"] == "Right" and first["time"] == pytest.approx(0.15 + 0.1405, abs=1e-3)
     h = read_history(out / "history.csv")
@@ -105,6 +107,7 @@ def test_pants_walk_torque_table(tmp_path, donned):
         {"name": "about_p", "segment": "R_shank", "aj": "all", "torque_point": P},
     ]  # fmt: skip
     sets = [
+        "initial.don=false",
         f"initial.positions={donned}",
         "mesh.n_around=8",
         "mesh.n_along=6",
