@@ -494,7 +494,8 @@ def _measures_lines(h: dict[str, np.ndarray], s: dict) -> list[str]:
     for name, j in m["joints"].items():
         if j["work"] is not None:
             lines.append(
-                f"- work of the {name} joint against the garment: {j['work']:.4g} J "
+                f"- work of the {'measured' if name == 'joint' else name} joint against the "
+                f"garment: {j['work']:.4g} J "
                 f"(flexion {_fmt(j['work_flexion'])} J)"
             )
     d = m["dissipation"]

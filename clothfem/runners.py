@@ -176,6 +176,24 @@ def _mocap_motions(scene: dict[str, Any]) -> dict[int, PlayedMotion]:
     return out
 
 
+def keyframe_motion(seg: dict[str, Any]) -> PlayedMotion:
+    """The motion of a ``type = "keyframes"`` segment: its centres and turned axes at the key
+    times, interpolated (:class:`InterpolatedMotion`), played from t = 0 and resting at the
+    last key (ValueError if two keys turn more than 90 deg apart)."""
+    from scipy.spatial.transform import Rotation
+
+    times = np.asarray(seg["times"], dtype=float)
+    turns = seg["turns"] if seg["turns"] is not None else np.zeros((times.size, 3))
+    motion = InterpolatedMotion(
+        times=times,
+        centres=np.asarray(seg["centres"], dtype=float),
+        rotations=Rotation.from_rotvec(np.asarray(turns)).as_matrix()
+        @ _frame(seg["axis"], seg["up"]),
+        name=seg["name"],
+    )
+    return PlayedMotion(motion=motion, t_end=float(times[-1]), joint_local=np.zeros(3))
+
+
 def body_motions(scene: dict[str, Any]) -> list[FixedMotion | HingeMotion | PlayedMotion]:
     """One motion per ``[[body]]`` segment (order kept), time in s."""
     out: list[FixedMotion | HingeMotion | PlayedMotion] = []
@@ -183,6 +201,9 @@ def body_motions(scene: dict[str, Any]) -> list[FixedMotion | HingeMotion | Play
     for i, seg in enumerate(scene["body"]):
         if seg["type"] == "mocap":
             out.append(mocap[i])
+            continue
+        if seg["type"] == "keyframes":
+            out.append(keyframe_motion(seg))
             continue
         q0 = _frame(seg["axis"], seg["up"])
         if seg["type"] == "fixed":
@@ -290,6 +311,9 @@ def contact_log(scene: dict[str, Any]) -> list[str]:
         r = ", ".join(f"{v:g}" for v in seg["radii"])
         if seg["type"] == "fixed":
             segs.append(f"{seg['name']} fixed (radii {r} m)")
+        elif seg["type"] == "keyframes":
+            n, t = len(seg["times"]), seg["times"][-1]
+            segs.append(f"{seg['name']} keyframes, {n} poses over {t:g} s (radii {r} m)")
         elif seg["type"] == "mocap":
             w = seg["window"]
             rep = (

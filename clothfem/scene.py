@@ -102,6 +102,7 @@ class Key:
         kinds = {
             "vec3": "3 numbers",
             "floats": "a list of numbers",
+            "vec3s": "a list of [x, y, z]",
             "strs": "a list of strings",
             "float": "a number",
             "int": "an integer",
@@ -507,10 +508,11 @@ SCHEMA: dict[str, Section] = {
             "name": Key("str", "segment name (e.g. 'upper_arm', 'forearm')", required=True),
             "type": Key(
                 "choice",
-                "segment motion: at rest, a hinge, or motion capture (Eq. 27 frames of a C3D / "
-                "TRC recording, interpolated)",
+                "segment motion: at rest, a hinge, keyframes (poses at given times, "
+                "interpolated), or motion capture (Eq. 27 frames of a C3D / TRC recording, "
+                "interpolated)",
                 required=True,
-                choices=("fixed", "hinge", "mocap"),
+                choices=("fixed", "hinge", "keyframes", "mocap"),
             ),
             "radii": Key(
                 "vec3",
@@ -541,6 +543,18 @@ SCHEMA: dict[str, Section] = {
                 "constant rate by omega omega_ramp / 2); 0: the rate jumps to omega at the start",
                 default=0.0,
                 lo=0.0,
+            ),
+            "times": Key(
+                "floats",
+                "keyframes: the key times [s] after solver.settle_time, from 0, strictly "
+                "increasing (at least 2); the segment rests at its last pose afterwards",
+            ),
+            "centres": Key("vec3s", "keyframes: the ellipsoid centre at each key time [m]"),
+            "turns": Key(
+                "vec3s",
+                "keyframes: the rotation vector [rad] of the ellipsoid's axes from their pose at "
+                "t = 0 (axis, up) at each key time (default: no turn); consecutive keys within "
+                "90 deg (centres: cubic spline, rotations: rotation spline)",
             ),
             "file": Key(
                 "str",
@@ -601,6 +615,7 @@ SCHEMA: dict[str, Section] = {
         variants={
             "fixed": ("centre",),
             "hinge": ("centre", "joint", "hinge_axis", "angle_max"),
+            "keyframes": ("times", "centres"),
             "mocap": ("file", "j1", "j2", "m", "window"),
         },
     ),
@@ -899,6 +914,13 @@ def _check_value(path: str, key: Key, value: Any) -> Any:
     elif key.kind == "strs":
         if not (isinstance(value, list) and value and all(isinstance(v, str) for v in value)):
             _fail(path, f"must be a non-empty list of strings, got {value!r}")
+    elif key.kind == "vec3s":
+        if not (
+            isinstance(value, list)
+            and all(isinstance(v, list) and len(v) == 3 and all(map(number, v)) for v in value)
+        ):
+            _fail(path, f"must be a list of 3-number lists, got {value!r}")
+        value = [[float(x) for x in v] for v in value]
     elif key.kind == "floats":
         if not (isinstance(value, list) and all(number(v) for v in value)):
             _fail(path, f"must be a list of numbers, got {value!r}")
@@ -1130,6 +1152,7 @@ def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
     names = [seg["name"] for seg in body]
     cache: dict[Path, Any] = {}
     for i, seg in enumerate(body):
+        _validate_keyframes(seg, f"body[{i}]", out["solver"]["integrator"])
         if seg["type"] != "mocap":
             for k in ("file", "j1", "j2", "m", "window", "placed_by", "stride_markers", "offset"):
                 if seg[k] is not None:
@@ -1208,6 +1231,32 @@ def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
                 f"required: segment {placed!r} places the recording",
             )
         seg["placed_by"] = placed
+
+
+def _validate_keyframes(seg: dict[str, Any], key: str, integrator: str) -> None:
+    """A ``keyframes`` segment: its times, centres and turns (keys of it only)."""
+    if seg["type"] != "keyframes":
+        for k in ("times", "centres", "turns"):
+            if seg[k] is not None:
+                _fail(f"{key}.{k}", "is a key of type = 'keyframes' segments only")
+        return
+    if integrator == "static":
+        _fail(f"{key}.type", "'keyframes' needs solver.integrator = 'explicit' or 'newmark'")
+    t = seg["times"]
+    if len(t) < 2 or t[0] != 0.0 or any(b <= a for a, b in zip(t, t[1:], strict=False)):
+        _fail(f"{key}.times", f"must start at 0 and increase strictly (>= 2 keys), got {t!r}")
+    for k in ("centres", "turns"):
+        if seg[k] is not None and len(seg[k]) != len(t):
+            _fail(f"{key}.{k}", f"must give {len(t)} entries (one per key time), got {len(seg[k])}")
+    for k in ("joint", "hinge_axis", "angle_max"):
+        if seg[k] is not None:
+            _fail(f"{key}.{k}", "is a key of type = 'hinge' segments only")
+    from .runners import keyframe_motion
+
+    try:
+        keyframe_motion(seg)
+    except ValueError as exc:
+        _fail(f"{key}.turns", str(exc))
 
 
 def _validate_repeat(seg: dict[str, Any], key: str) -> None:

@@ -138,7 +138,7 @@ def test_resistance_measures_and_report(tmp_path, capsys):
         math.sqrt(np.mean(np.diff(tau) ** 2)) / tau.mean(), rel=1e-12
     )
     text = R.report_markdown(tmp_path / "run")
-    assert "work of the joint joint against the garment: 0.04 J (flexion 0.04 J)" in text
+    assert "work of the measured joint against the garment: 0.04 J (flexion 0.04 J)" in text
     assert "energy dissipated by the clothing: 0.0044 J = friction 0.0044 J + material 0 J" in text
     assert "flexion torque |tau|: peak 0.302 N m" in text
     assert "torque roughness over 2-20 deg" in text
