@@ -1269,14 +1269,246 @@ def integrate_explicit(
     a)`` sees the velocity and acceleration after every step (e.g. to checkpoint them).
     Returns (records, the stability estimate at the start).
     """
-    if check not in ("error", "warn", "off"):
-        raise ValueError(f"check must be 'error', 'warn' or 'off', got {check!r}")
-    _finite("safety", safety, 0.0, 1.0, lo_open=True)
-    _finite("t_end", t_end, 0.0, math.inf, lo_open=True, hi_open=True)
-    s = _as_system(system)
-    lam_of = _load_fn(load)
-    lam = lam_of(0.0)
-    st = stable or stable_time_step(s, lam=lam)
+    stepper = ExplicitStepper(
+        system,
+        t_end=t_end,
+        dt=dt,
+        load=load,
+        damping=damping,
+        velocity=velocity,
+        check=check,
+        safety=safety,
+        stable=stable,
+        contact=contact,
+        rebase=rebase,
+        first_step=first_step,
+        acceleration=acceleration,
+        recheck_every=recheck_every,
+        clock=clock,
+        work=work,
+        damping_until=damping_until,
+    )
+    records = []
+    while not stepper.done:
+        rec = stepper.step(measure=measure)
+        records.append(rec)
+        if on_step is not None:
+            on_step(rec)
+        if on_state is not None:
+            on_state(rec, stepper.v, stepper.a)
+    return records, stepper.stable
+
+
+class ExplicitStepper:
+    """The central difference of :func:`integrate_explicit` one step at a time: built with
+    the same arguments (but the callbacks), :meth:`step` advances one step and returns its
+    record; the state is ``v``, ``a`` and the system's (positions, directors); ``done``
+    once ``t_end`` is reached; ``stable`` is the stability estimate at the start."""
+
+    def __init__(
+        self,
+        system: ShellModel | ShellSystem | LinearSystem,
+        *,
+        t_end: float,
+        dt: float | None = None,
+        load: LoadFunction | None = None,
+        damping: Damping = Damping(),
+        velocity: PETSc.Vec | None = None,
+        check: str = "error",
+        safety: float = 0.9,
+        stable: StableStep | None = None,
+        contact=None,
+        rebase: float | None = 0.5,
+        first_step: int = 0,
+        acceleration: PETSc.Vec | None = None,
+        recheck_every: int = 0,
+        clock: tuple[float, int, float, int] | None = None,
+        work: tuple[float, float] = (0.0, 0.0),
+        damping_until: float = math.inf,
+    ) -> None:
+        if check not in ("error", "warn", "off"):
+            raise ValueError(f"check must be 'error', 'warn' or 'off', got {check!r}")
+        _finite("safety", safety, 0.0, 1.0, lo_open=True)
+        _finite("t_end", t_end, 0.0, math.inf, lo_open=True, hi_open=True)
+        s = self.system = _as_system(system)
+        self.lam_of = _load_fn(load)
+        st = self.stable = stable or stable_time_step(s, lam=self.lam_of(0.0))
+        dt = _checked_step(st, dt, safety, check)
+        if not (isinstance(first_step, int) and first_step >= 0):
+            raise ValueError(f"first_step must be an integer >= 0, got {first_step!r}")
+        if not (isinstance(recheck_every, int) and recheck_every >= 0):
+            raise ValueError(f"recheck_every must be an integer >= 0, got {recheck_every!r}")
+        if clock is not None and not (len(clock) == 4 and clock[1] <= first_step < clock[3]):
+            raise ValueError(
+                f"clock must be (t_base, step_base <= first_step, h, n_end), got {clock}"
+            )
+        self.t_end, self.safety, self.contact, self.rebase = t_end, safety, contact, rebase
+        self.recheck_every, self.damping, self.damping_until = recheck_every, damping, damping_until
+        self.x, self.v = _start(s, velocity)
+        self.K0 = _initial_K0(s, self.x, damping)
+        self.singular = False  # a lumped rotary block was singular on this rank
+        self.tmp = self.x.duplicate()
+        # the clock: t = t_base + (step - step_base) h up to step n_end (t = step h for a run
+        # that never shrank its step); a shrink re-bases it; ``clock`` restores it
+        if clock is None:
+            self.t_base, self.step_base = 0.0, 0
+            self.n_end = max(1, math.ceil(t_end / dt - 1e-9))
+            self.h = t_end / self.n_end
+            if first_step > self.n_end:
+                raise ValueError(f"first_step {first_step} is past the last step {self.n_end}")
+        else:
+            self.t_base, self.step_base = float(clock[0]), int(clock[1])
+            self.h, self.n_end = float(clock[2]), int(clock[3])
+        t_start = self.t_base + (first_step - self.step_base) * self.h
+        self.damp = damping.active and t_start < damping_until * (1 - 1e-12)
+        self.lam = self.lam_of(t_start)
+        self.r, self.fe = self.x.duplicate(), self.x.duplicate()
+        self.a = self.x.duplicate()
+        self._accel(self.x, self.v, self.lam, self.a)  # also the forces at x (energies)
+        if acceleration is not None:
+            acceleration.copy(self.a)
+        self.energy = _Energy(
+            s, self.x, self.v, self.a, self.lam, damping if self.damp else Damping(), self.K0,
+            lumped=True,
+        )  # fmt: skip
+        self.energy.W_ext, self.energy.W_damp = (float(w) for w in work)
+        self.r, self.fe = self.energy.r, self.energy.fe  # _accel fills them: no second assembly
+        self.energy.ready = True
+        s.commit(self.x)
+        self.xo, self.vp = self.x.duplicate(), self.x.duplicate()
+        self.step_index = first_step
+
+    @property
+    def done(self) -> bool:
+        """Whether the last step (to ``t_end``) is taken."""
+        return self.step_index >= self.n_end
+
+    def _accel(self, x, vpred, lam, a) -> None:
+        s = self.system
+        s.forces(x, lam, self.r, self.fe)  # state at x
+        ra = -self.r.getArray(readonly=True)
+        if self.damp:
+            ra = ra - self._damp(vpred)
+        try:
+            aa = s.lumped_solve(ra)
+        except np.linalg.LinAlgError:
+            # rank-local: raising here would leave the other ranks waiting in the next
+            # collective call. NaN makes the (global) energy check below fail on every rank.
+            self.singular = True
+            aa = np.full_like(ra, np.nan)
+        rows, _ = s.bc(lam)
+        aa[rows] = 0.0
+        a.setArray(aa)
+
+    def _damp(self, vv) -> np.ndarray:
+        out = np.zeros(vv.getLocalSize())
+        if self.damping.mass > 0:
+            out += self.damping.mass * self.system.lumped_mult(vv.getArray(readonly=True))
+        if self.damping.stiffness > 0:
+            self.K0.mult(vv, self.tmp)
+            out += self.damping.stiffness * self.tmp.getArray(readonly=True)
+        return out
+
+    def _recheck(self) -> None:
+        """After every ``recheck_every`` steps (absolute indices: a resumed run rechecks where
+        the uninterrupted one did), shrink the step to ``safety`` x the state's stable step
+        if that is smaller (the remaining span split evenly)."""
+        step = self.step_index
+        if not (self.recheck_every and step > 0 and step % self.recheck_every == 0):
+            return
+        now = stable_time_step(self.system, lam=self.lam)
+        if self.safety * now.dt_crit < self.h:
+            self.t_base = self.t_base + (step - self.step_base) * self.h
+            self.step_base = step
+            n_rem = max(
+                1, math.ceil((self.t_end - self.t_base) / (self.safety * now.dt_crit) - 1e-9)
+            )
+            self.h, self.n_end = (self.t_end - self.t_base) / n_rem, step + n_rem
+            log.info(
+                "explicit: at t = %.6g s dt_crit = %.4e s (%.3f x at the start): dt %.4e s",
+                self.t_base,
+                now.dt_crit,
+                now.dt_crit / self.stable.dt_crit,
+                self.h,
+            )
+
+    def step(self, *, measure: Callable[[int, float], bool] | None = None) -> DynamicStep:
+        """One step; ``measure(step, t)``: whether its record carries the strain energy
+        (None: yes). Raises :class:`DynamicsDivergence` or ``FloatingPointError`` when the
+        state blows up."""
+        s, x, v, a, xo, vp = self.system, self.x, self.v, self.a, self.xo, self.vp
+        self._recheck()
+        self.step_index += 1
+        step, h = self.step_index, self.h
+        t0 = time.perf_counter()
+        t = self.t_base + (step - self.step_base) * h
+        lam = self.lam = self.lam_of(t)
+        if self.damp and t > self.damping_until * (1 + 1e-12):  # from this step on: undamped
+            self.damp = False
+            self.energy.damping = Damping()
+        x.copy(xo)
+        v.axpy(0.5 * h, a)  # v: the half-step velocity v_n+1/2 (leapfrog form of the update)
+        x.axpy(h, v)  # x + h v_n + h^2/2 a_n: the contact-free predictor (Eq. 23)
+        rows, values = s.bc(lam)
+        if len(rows):
+            xa = x.getArray()
+            xa[rows] = values
+        s.set_time_step(h)
+        if self.contact is not None:
+            # FILM on the predictor; the corrected nodes' half-step velocity becomes the
+            # post-impact one. Correcting the full-step velocity instead (v_n + h a_n) made the
+            # tangential update explicit Euler, whose energy grows by 1 + (h omega)^2 / 2 a step
+            self.contact.correct_positions(x, v, t, h, rows)
+            self.contact.correct_velocities(v)
+        v.copy(vp)
+        vp.axpy(0.5 * h, a)  # predicted v_n+1 for the damping forces
+        a_new = a.duplicate()
+        self._accel(x, vp, lam, a_new)
+        v.axpy(0.5 * h, a_new)
+        if len(rows):
+            va = v.getArray()
+            va[rows] = (x.getArray(readonly=True)[rows] - xo.getArray(readonly=True)[rows]) / h
+        a_new.copy(a)
+        a_new.destroy()
+        s.commit(x)  # (free for the shell: _accel() left its state at x)
+        measured = measure is None or measure(step, t)
+        K, U, W, Wd, diss = self.energy.advance(xo, x, v, a, lam, h, strain=measured)
+        self._check(K + (U if measured else 0.0), t)
+        wall = time.perf_counter() - t0
+        clock = (self.t_base, self.step_base, h, self.n_end)
+        return DynamicStep(step, t, h, lam, 0, 0.0, 0.0, 0, K, U, W, Wd, diss, wall, clock)
+
+    def _check(self, energy: float, t: float) -> None:
+        """Stop on a non-finite state or a director turned past the parametrisation's reach;
+        re-base the directors turned beyond ``rebase``."""
+        s, h = self.system, self.h
+        if not math.isfinite(energy):
+            if s.comm.allreduce(self.singular, op=MPI.LOR):
+                raise DynamicsDivergence(
+                    f"explicit: the lumped rotary mass became singular at t = {t:.6g}"
+                    + rotation_note(s)
+                )
+            raise FloatingPointError(
+                f"explicit integration blew up at t = {t:.6g} (dt = {h:.4g})" + rotation_note(s)
+            )
+        if self.rebase is not None and isinstance(s, ShellSystem):
+            turn = s.max_rotation()  # (collective)
+            if turn > MAX_ROTATION:
+                raise DynamicsDivergence(
+                    f"explicit: a director rotation reached |theta| = {turn:.3g} rad >= pi in "
+                    f"the step to t = {t:.6g} s (from <= {self.rebase:g} rad; dt = {h:.4g} s, "
+                    f"dt_crit at the start {self.stable.dt_crit:.4g} s): the step does not "
+                    "resolve the director motion and crossed the singularity of the rotation "
+                    "parametrisation (an unstable step, e.g. the state's stable step fell "
+                    "below dt: lower solver.safety or set solver.recheck_every)"
+                )
+            if turn > self.rebase:  # (same on every rank)
+                s.rebase(self.x, self.v, self.a, threshold=self.rebase)
+
+
+def _checked_step(st: StableStep, dt: float | None, safety: float, check: str) -> float:
+    """The explicit step [s]: ``dt`` or ``safety`` x the stable step, logged and checked
+    against the stable step (``check``: error, warn or off)."""
     if not st.converged:
         log.warning(
             "explicit: the Lanczos estimate did not converge in %d iterations; dt_crit = %.4e s "
@@ -1301,153 +1533,5 @@ def integrate_explicit(
         msg = f"explicit dt = {dt:.4g} s exceeds the stable estimate dt_crit = {st.dt_crit:.4g} s"
         if check == "error":
             raise ValueError(msg)
-        warnings.warn(msg, stacklevel=2)
-    if not (isinstance(first_step, int) and first_step >= 0):
-        raise ValueError(f"first_step must be an integer >= 0, got {first_step!r}")
-    if not (isinstance(recheck_every, int) and recheck_every >= 0):
-        raise ValueError(f"recheck_every must be an integer >= 0, got {recheck_every!r}")
-    if clock is not None and not (len(clock) == 4 and clock[1] <= first_step < clock[3]):
-        raise ValueError(f"clock must be (t_base, step_base <= first_step, h, n_end), got {clock}")
-    x, v = _start(s, velocity)
-    K0 = _initial_K0(s, x, damping)
-    r, fe = x.duplicate(), x.duplicate()
-
-    singular = [False]  # a lumped rotary block was singular on this rank
-
-    damp = [damping.active]  # damping on the current step (set below from the start time)
-
-    def accel(x, vpred, lam, a) -> None:
-        s.forces(x, lam, r, fe)  # state at x
-        ra = -r.getArray(readonly=True)
-        if damp[0]:
-            ra = ra - _damp(vpred)
-        try:
-            aa = s.lumped_solve(ra)
-        except np.linalg.LinAlgError:
-            # rank-local: raising here would leave the other ranks waiting in the next
-            # collective call. NaN makes the (global) energy check below fail on every rank.
-            singular[0] = True
-            aa = np.full_like(ra, np.nan)
-        rows, _ = s.bc(lam)
-        aa[rows] = 0.0
-        a.setArray(aa)
-
-    tmp = x.duplicate()
-
-    def _damp(vv) -> np.ndarray:
-        out = np.zeros(vv.getLocalSize())
-        if damping.mass > 0:
-            out += damping.mass * s.lumped_mult(vv.getArray(readonly=True))
-        if damping.stiffness > 0:
-            K0.mult(vv, tmp)
-            out += damping.stiffness * tmp.getArray(readonly=True)
-        return out
-
-    # the clock: t = t_base + (step - step_base) h up to step n_end (t = step h for a run
-    # that never shrank its step); a shrink re-bases it; ``clock`` restores it
-    if clock is None:
-        t_base, step_base = 0.0, 0
-        n_end = max(1, math.ceil(t_end / dt - 1e-9))
-        h = t_end / n_end
-        if first_step > n_end:
-            raise ValueError(f"first_step {first_step} is past the last step {n_end}")
-    else:
-        t_base, step_base, h, n_end = float(clock[0]), int(clock[1]), float(clock[2]), int(clock[3])
-    t_start = t_base + (first_step - step_base) * h
-    damp[0] = damping.active and t_start < damping_until * (1 - 1e-12)
-    lam = lam_of(t_start)
-    a = x.duplicate()
-    accel(x, v, lam, a)  # also leaves the forces at x for the energy bookkeeping
-    if acceleration is not None:
-        acceleration.copy(a)
-    energy = _Energy(s, x, v, a, lam, damping if damp[0] else Damping(), K0, lumped=True)
-    energy.W_ext, energy.W_damp = (float(w) for w in work)
-    r, fe = energy.r, energy.fe  # accel() fills them: no second assembly per step
-    energy.ready = True
-    s.commit(x)
-    xo, vp = x.duplicate(), x.duplicate()
-    records = []
-    step = first_step
-    while step < n_end:
-        if recheck_every and step > 0 and step % recheck_every == 0:
-            # at the state after step `step` (an absolute index: a resumed run rechecks
-            # where the uninterrupted one did)
-            now = stable_time_step(s, lam=lam)
-            if safety * now.dt_crit < h:
-                t_base = t_base + (step - step_base) * h
-                step_base = step
-                n_rem = max(1, math.ceil((t_end - t_base) / (safety * now.dt_crit) - 1e-9))
-                h, n_end = (t_end - t_base) / n_rem, step + n_rem
-                log.info(
-                    "explicit: at t = %.6g s dt_crit = %.4e s (%.3f x at the start): dt %.4e s",
-                    t_base,
-                    now.dt_crit,
-                    now.dt_crit / st.dt_crit,
-                    h,
-                )
-        step += 1
-        t0 = time.perf_counter()
-        t = t_base + (step - step_base) * h
-        lam = lam_of(t)
-        if damp[0] and t > damping_until * (1 + 1e-12):  # from this step on: undamped
-            damp[0] = False
-            energy.damping = Damping()
-        x.copy(xo)
-        v.axpy(0.5 * h, a)  # v: the half-step velocity v_n+1/2 (leapfrog form of the update)
-        x.axpy(h, v)  # x + h v_n + h^2/2 a_n: the contact-free predictor (Eq. 23)
-        rows, values = s.bc(lam)
-        if len(rows):
-            xa = x.getArray()
-            xa[rows] = values
-        s.set_time_step(h)
-        if contact is not None:
-            # FILM on the predictor; the corrected nodes' half-step velocity becomes the
-            # post-impact one. Correcting the full-step velocity instead (v_n + h a_n) made the
-            # tangential update explicit Euler, whose energy grows by 1 + (h omega)^2 / 2 a step
-            contact.correct_positions(x, v, t, h, rows)
-            contact.correct_velocities(v)
-        v.copy(vp)
-        vp.axpy(0.5 * h, a)  # predicted v_n+1 for the damping forces
-        a_new = a.duplicate()
-        accel(x, vp, lam, a_new)
-        v.axpy(0.5 * h, a_new)
-        if len(rows):
-            va = v.getArray()
-            va[rows] = (x.getArray(readonly=True)[rows] - xo.getArray(readonly=True)[rows]) / h
-        a_new.copy(a)
-        a_new.destroy()
-        s.commit(x)  # (free for the shell: accel() left its state at x)
-        measured = measure is None or measure(step, t)
-        K, U, W, Wd, diss = energy.advance(xo, x, v, a, lam, h, strain=measured)
-        if not math.isfinite(K + (U if measured else 0.0)):
-            if s.comm.allreduce(singular[0], op=MPI.LOR):
-                raise DynamicsDivergence(
-                    f"explicit: the lumped rotary mass became singular at t = {t:.6g}"
-                    + rotation_note(s)
-                )
-            raise FloatingPointError(
-                f"explicit integration blew up at t = {t:.6g} (dt = {h:.4g})" + rotation_note(s)
-            )
-        if rebase is not None and isinstance(s, ShellSystem):
-            turn = s.max_rotation()  # (collective)
-            if turn > MAX_ROTATION:
-                raise DynamicsDivergence(
-                    f"explicit: a director rotation reached |theta| = {turn:.3g} rad >= pi in "
-                    f"the step to t = {t:.6g} s (from <= {rebase:g} rad; dt = {h:.4g} s, "
-                    f"dt_crit at the start {st.dt_crit:.4g} s): the step does not resolve the "
-                    "director motion and crossed the singularity of the rotation "
-                    "parametrisation (an unstable step, e.g. the state's stable step fell "
-                    "below dt: lower solver.safety or set solver.recheck_every)"
-                )
-            if turn > rebase:  # (same on every rank)
-                s.rebase(x, v, a, threshold=rebase)
-        wall = time.perf_counter() - t0
-        rec = DynamicStep(
-            step, t, h, lam, 0, 0.0, 0.0, 0, K, U, W, Wd, diss, wall, (t_base, step_base, h, n_end)
-        )
-        records.append(rec)
-        if on_step is not None:
-            on_step(rec)
-        if on_state is not None:
-            on_state(rec, v, a)
-    return records, st
+        warnings.warn(msg, stacklevel=3)
+    return dt

@@ -132,16 +132,16 @@ class Integrator(Protocol):
     failures: tuple[type[BaseException], ...]  # errors that stop the run as a divergence
     X: np.ndarray | None  # owned nodes' reference positions (n, 3) [m] (None: no body)
 
-    def run(
-        self,
-        *,
-        on_step: Callable[[StepInfo], None],
-        after_step: Callable[[Callable[[], dict[str, np.ndarray]]], None],
-        ends_row: Callable[[float], bool],
-    ) -> None:
-        """Advance to ``control.t_end``: ``on_step`` after every accepted step, then
-        ``after_step(arrays)`` (``arrays()``: the state to checkpoint); ``ends_row(t)``:
-        whether the step to t ends a history row (its energies are then measured)."""
+    @property
+    def done(self) -> bool:
+        """Whether the state is at ``control.t_end``."""
+
+    def step(self, *, ends_row: Callable[[float], bool]) -> StepInfo:
+        """Advance the state by one accepted step; ``ends_row(t)``: whether the step to t
+        ends a history row (its energies are then measured)."""
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """The state to checkpoint (rank-local arrays; a checkpoint's ``data`` restores it)."""
 
     def body_forces(self) -> BodyForces | None:
         """The last step's contact forces on the body (None without a body)."""
@@ -284,6 +284,7 @@ class _Explicit:
             self.area = self.fc.mass / (model.material.rho * model.thickness)
         self.last = None
         self.wall = 0.0  # contact wall time up to the last row [s]
+        self.stepper = self._stepper()
 
     def _stable_step(self) -> None:
         from .dynamics import stable_time_step
@@ -324,21 +325,16 @@ class _Explicit:
         if "run_self_max" in data:
             self.self_max, self.self_left = int(data["run_self_max"]), int(data["run_self_left"])
 
-    def run(self, *, on_step, after_step, ends_row) -> None:
-        from .dynamics import Damping, integrate_explicit
+    def _stepper(self):
+        """The central difference from the start (or the checkpoint's) state."""
+        from .dynamics import Damping, ExplicitStepper
 
         sv = self.scene["solver"]
-
-        def step(r) -> None:
-            self.last = r
-            on_step(StepInfo(time=r.time, dt=r.dt))
-
-        integrate_explicit(
+        return ExplicitStepper(
             self.system,
             t_end=self.control.t_end,
             dt=self.dt,
             load=self.control.load,
-            on_step=step,
             stable=self.st,
             contact=self.fc if self.sc is None else self.sc,
             safety=sv["safety"],
@@ -348,11 +344,21 @@ class _Explicit:
             first_step=self.start["step"],
             velocity=self.start["v"],
             acceleration=self.start["a"],
-            on_state=lambda r, v, a: after_step(lambda: self._arrays(r, v, a)),
-            measure=lambda _k, t: ends_row(t),  # the strain energy only for the rows
             damping=Damping(mass=sv["settle_damping"]),
             damping_until=self.control.t_settle,
         )
+
+    @property
+    def done(self) -> bool:
+        return self.stepper.done
+
+    def step(self, *, ends_row: Callable[[float], bool]) -> StepInfo:
+        # the strain energy only for the steps that end a row
+        self.last = self.stepper.step(measure=lambda _k, t: ends_row(t))
+        return StepInfo(time=self.last.time, dt=self.last.dt)
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        return self._arrays(self.last, self.stepper.v, self.stepper.a)
 
     def _arrays(self, r, v, a) -> dict[str, np.ndarray]:
         from .dynamics import StableStep
@@ -497,23 +503,18 @@ class _Newmark:
         self.timers = dict(self.contact.timers)
         self.last = None
 
-    def run(self, *, on_step, after_step, ends_row) -> None:
+    @property
+    def done(self) -> bool:
+        return self.dc.reached(self.control.t_end)
+
+    def step(self, *, ends_row: Callable[[float], bool]) -> StepInfo:
         sv = self.scene["solver"]
-
-        def step(r) -> None:
-            self.last = r
-            self.cut += r.cutbacks
-            self.newton += r.contact.newton_iterations
-            on_step(StepInfo(time=r.time, dt=r.dt))
-            after_step(self.state_arrays)
-
-        self.dc.run(
-            t_end=self.control.t_end,
-            dt=sv["dt"],
-            dt_min=sv["dt_min"],
-            load=self.control.load,
-            on_step=step,
+        r = self.last = self.dc.advance(
+            t_end=self.control.t_end, dt=sv["dt"], dt_min=sv["dt_min"], load=self.control.load
         )
+        self.cut += r.cutbacks
+        self.newton += r.contact.newton_iterations
+        return StepInfo(time=r.time, dt=r.dt)
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         return {
@@ -760,11 +761,9 @@ def run_dynamic(
     )
     with ResultWriter(out, model, keep_rows=keep, resume_after=after) as writer:
         try:
-            integ.run(
-                on_step=lambda info: run.on_step(info, writer, progress),
-                after_step=run.after_step,
-                ends_row=run.ends_row,
-            )
+            while not integ.done:
+                run.on_step(integ.step(ends_row=run.ends_row), writer, progress)
+                run.after_step(integ.state_arrays)
             run.snapshot("final", end)
         except integ.failures as exc:
             t, angle = run.t_last, plan.angle_at(run.t_last)

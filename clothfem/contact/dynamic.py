@@ -137,6 +137,7 @@ class DynamicContact:
         self.v.set(0.0)
         self.a.set(0.0)
         self.t = 0.0
+        self.steps_taken = 0  # accepted steps of this object (records' step)
         self._xt = self.x.duplicate()
 
     def state_arrays(self) -> dict:
@@ -237,41 +238,63 @@ class DynamicContact:
         load: Callable[[float], float] = lambda t: 1.0,
         on_step: Callable[[DynamicContactRecord], None] | None = None,
     ) -> list[DynamicContactRecord]:
-        """Step to ``t_end`` [s] with steps of at most ``dt`` [s]; halve the step on failure
-        down to ``dt_min`` (default dt / 64), then raise ContactDivergence (accepted steps
-        went to on_step). A halved step is kept and doubled again after ``grow_after``
-        steps without a failure."""
+        """Step to ``t_end`` [s] with :meth:`advance` (steps of at most ``dt`` [s], halved on
+        failure down to ``dt_min``; accepted steps went to ``on_step`` when it raises)."""
+        records: list[DynamicContactRecord] = []
+        while not self.reached(t_end):
+            r = self.advance(t_end=t_end, dt=dt, dt_min=dt_min, load=load)
+            records.append(r)
+            if on_step is not None:
+                on_step(r)
+        return records
+
+    def reached(self, t_end: float) -> bool:
+        """Whether the state is at ``t_end`` [s]."""
+        return self.t >= t_end - 1e-12 * t_end
+
+    def advance(
+        self,
+        *,
+        t_end: float,
+        dt: float,
+        dt_min: float | None = None,
+        load: Callable[[float], float] = lambda t: 1.0,
+    ) -> DynamicContactRecord:
+        """One accepted step towards ``t_end`` [s] of at most ``dt`` [s] with the load factor
+        ``load(t)``: a failed step is halved down to ``dt_min`` (default dt / 64), then
+        ContactDivergence is raised. A halved step is kept and doubled again after
+        ``grow_after`` steps without a failure."""
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0 s, got {dt!r}")
         dt_min = dt / 64 if dt_min is None else dt_min
         if self.h is None:
             self.h = dt
-        records, step = [], 0
-        while self.t < t_end - 1e-12 * t_end:
-            h, cut = min(self.h, dt, t_end - self.t), 0
-            while True:
-                try:
-                    rec = self.step(h, load(self.t + h))
-                    break
-                except ContactDivergence as exc:
-                    cut += 1
-                    h /= 2
-                    log.info("dynamic contact: step failed (%s); retry with dt = %.3e s", exc, h)
-                    if h < dt_min:
-                        raise ContactDivergence(
-                            f"dynamic contact failed at t = {self.t:.6g} s with dt below "
-                            f"dt_min = {dt_min:.3g} s (last failure: {exc})"
-                        ) from exc
-            # keep a cut step; double it again after `grow_after` steps without a cut
-            self.streak = 0 if cut else self.streak + 1
-            self.h = h
-            if self.streak >= self.grow_after and self.h < dt:
-                self.h, self.streak = min(2 * self.h, dt), 0
-            step += 1
-            r = DynamicContactRecord(
-                step, self.t, h, rec, self.kinetic_energy(), self.system.strain_energy(), cut
-            )
-            records.append(r)
-            if on_step is not None:
-                on_step(r)
-        return records
+        h, cut = min(self.h, dt, t_end - self.t), 0
+        while True:
+            try:
+                rec = self.step(h, load(self.t + h))
+                break
+            except ContactDivergence as exc:
+                cut += 1
+                h /= 2
+                log.info("dynamic contact: step failed (%s); retry with dt = %.3e s", exc, h)
+                if h < dt_min:
+                    raise ContactDivergence(
+                        f"dynamic contact failed at t = {self.t:.6g} s with dt below "
+                        f"dt_min = {dt_min:.3g} s (last failure: {exc})"
+                    ) from exc
+        # keep a cut step; double it again after `grow_after` steps without a cut
+        self.streak = 0 if cut else self.streak + 1
+        self.h = h
+        if self.streak >= self.grow_after and self.h < dt:
+            self.h, self.streak = min(2 * self.h, dt), 0
+        self.steps_taken += 1
+        return DynamicContactRecord(
+            self.steps_taken,
+            self.t,
+            h,
+            rec,
+            self.kinetic_energy(),
+            self.system.strain_energy(),
+            cut,
+        )
