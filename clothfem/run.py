@@ -1,9 +1,10 @@
 """Run a validated scene: build only what it needs, solve, write results as they come.
 
 The log says what was built (and what was left out because the scene does not need it).
-Scenes with ``[[body]]`` segments, and dynamic scenes, run the paths of
-:mod:`clothfem.runners` (settling, then the segment motions; its own outputs). Otherwise
-results go to ``out``: ``fabric.xdmf`` (ParaView, meshio), ``history.csv`` (one row per
+Dynamic scenes run through :func:`clothfem.simulation.run_dynamic`, quasi-static scenes
+with ``[[body]]`` segments through :func:`clothfem.runners.run_contact_scene`; a scene with
+``[initial] don`` dons its pants first (:mod:`clothfem.particle.scene_donning`). A
+quasi-static scene without a body is solved here; its results go to ``out``: ``fabric.xdmf`` (ParaView, meshio), ``history.csv`` (one row per
 accepted step, flushed at once), ``final.png``. SIGTERM and Ctrl-C stop the run cleanly:
 files are closed and every step already written is kept; a run killed outright leaves
 readable files up to its last written step.
@@ -35,8 +36,9 @@ from .errors import RunStopped
 from .history import yarn_strain_columns
 from .io import Progress, ResultWriter, rank0_print, snapshot_png
 from .petsc_options import describe_direct_lu
-from .runners import contact_log, run_contact_scene
+from .runners import run_contact_scene
 from .scene import DECRIMPING_KEYS, SceneError, mesh_file_problem
+from .scene_body import contact_log
 from .shell import (
     Clamp,
     DahlFriction,

@@ -1251,7 +1251,7 @@ def _validate_keyframes(seg: dict[str, Any], key: str, integrator: str) -> None:
     for k in ("joint", "hinge_axis", "angle_max"):
         if seg[k] is not None:
             _fail(f"{key}.{k}", "is a key of type = 'hinge' segments only")
-    from .runners import keyframe_motion
+    from .scene_body import keyframe_motion
 
     try:
         keyframe_motion(seg)

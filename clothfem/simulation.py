@@ -45,24 +45,26 @@ from .contact.forces import joint_torque
 from .history import yarn_strain_columns
 from .io import Progress, ResultWriter, rank0_print
 from .report import joint_power, joint_work
-from .runners import (
-    _aj_mask,
-    _animation,
-    _bodies_at,
-    _end_together,
-    _events,
-    _measured_hinge,
-    _plan,
-    _progress_snapshots,
-    _snapshot,
-    _stop_with_fields,
-    _torque_columns,
-    _torque_plot,
-    _write_events,
-    body_motions,
+from .run_output import (
+    end_together,
     load_checkpoint,
+    plot_torque_angle,
+    progress_snapshots,
     save_checkpoint,
+    stop_with_fields,
+    torque_columns,
+    write_animation,
+    write_snapshot,
+)
+from .scene_body import (
+    aj_mask,
+    body_motions,
+    body_poses,
+    measured_hinge,
+    run_plan,
+    summary_events,
     torque_centre,
+    write_events,
 )
 from .shell import ShellModel
 from .static import SolverDivergence
@@ -96,7 +98,7 @@ def control_from_scene(scene: dict[str, Any], motions: list, t_end: float) -> Co
     t_ramp = scene["solver"]["ramp_time"]
     return Control(
         load=(lambda t: min(t / t_ramp, 1.0)) if t_ramp > 0 else (lambda t: 1.0),
-        bodies_at=_bodies_at(scene, motions),
+        bodies_at=body_poses(scene, motions),
         t_settle=scene["solver"]["settle_time"],
         t_end=t_end,
     )
@@ -584,10 +586,8 @@ class _Run:
         self.fixed = plan.measure.fixed_mask(integ.X) if plan.measure is not None else None
         self.table = None  # the [[torques]] measures (a body is required by the validation)
         if scene["torques"]:
-            self.table = TorqueTable(
-                scene, motions, integ.X, aj_mask=_aj_mask, centre=torque_centre
-            )
-        hinge = _measured_hinge(motions, plan.k_torque)
+            self.table = TorqueTable(scene, motions, integ.X, aj_mask=aj_mask, centre=torque_centre)
+        hinge = measured_hinge(motions, plan.k_torque)
         self.work = _JointWork(
             hinge, plan.k_torque, plan.hinge_axis, plan.t_settle, integ.impulsive
         )
@@ -623,7 +623,9 @@ class _Run:
         """``snapshot_<tag>.png`` of the state at ``t`` (collective)."""
         self.fields()
         bodies = self.control.bodies_at(t)[0] if self.scene["body"] else []
-        _snapshot(self.scene, self.model, self.out, self.comm, tag, bodies, pressure=self.pressure)
+        write_snapshot(
+            self.scene, self.model, self.out, self.comm, tag, bodies, pressure=self.pressure
+        )
 
     def on_step(self, info: StepInfo, writer: ResultWriter, progress: Progress) -> None:
         self.model.commit_material()  # the step is accepted: material histories to x_n+1
@@ -684,7 +686,7 @@ class _Run:
             "time": t,
             "dt": info.dt,
             "angle_deg": angle,
-            **_torque_columns(tau, res, flex),
+            **torque_columns(tau, res, flex),
             **({"substeps": k} if self.integ.impulsive else {}),
             **yarn_strain_columns(self.model),
             "joint_work": work,
@@ -702,10 +704,10 @@ class _Run:
         self.summary.update(final_angle_deg=angle, time=t, steps=c.step, max_penetration=c.pen)
         self.summary.update(self.integ.summary())
         self._progress(row, progress)
-        c.snap = _progress_snapshots(self.plan, c.snap, row["stage"], angle,
+        c.snap = progress_snapshots(self.plan, c.snap, row["stage"], angle,
                                      lambda tag: self.snapshot(tag, t), t=t)  # fmt: skip
         where = f"row {c.row} (t = {t:.6g} s)"
-        _stop_with_fields(self.check_stop, where, writer, t, self.fields)
+        stop_with_fields(self.check_stop, where, writer, t, self.fields)
 
     def _progress(self, row: dict[str, Any], progress: Progress) -> None:
         t, end = row["time"], self.plan.t_end
@@ -742,8 +744,8 @@ def run_dynamic(
     ``check_stop(where)`` is called after every row (raises to stop the run); ``summary`` is
     updated as the run goes. Raises :class:`SolverDivergence` when the integrator fails
     (the rows and fields written so far are kept, with a snapshot of the last state)."""
-    _write_events(scene, out, comm, summary)
-    plan = _plan(scene, body_motions(scene))
+    write_events(scene, out, comm, summary)
+    plan = run_plan(scene, body_motions(scene))
     control = control_from_scene(scene, plan.motions, plan.t_end)
     data = load_checkpoint(out, comm) if resume else None
     integ = INTEGRATORS[scene["solver"]["integrator"]](scene, model, control, comm, data=data)
@@ -773,7 +775,7 @@ def run_dynamic(
             ) from None
         finally:
             progress.close()
-            _end_together(comm)
+            end_together(comm)
             if scene["output"]["png"] and comm.rank == 0 and writer.csv_path.exists():
                 _plots(scene, out, writer.csv_path, summary, control)
     return out
@@ -781,11 +783,11 @@ def run_dynamic(
 
 def _plots(scene, out: Path, csv_path: Path, summary, control: Control) -> None:
     """The torque plots and the animation of a run (rank 0)."""
-    name, events = scene["scene"]["name"], _events(summary)
+    name, events = scene["scene"]["name"], summary_events(summary)
     if scene["body"]:
-        _torque_plot(csv_path, out / "torque_angle.png", name, events)
+        plot_torque_angle(csv_path, out / "torque_angle.png", name, events)
     if scene["torques"]:
         k = torque_segment_index(scene)
         primary = scene["body"][k]["name"] if k is not None else "[contact]"
         plot_torques(out, out / "torques.png", primary=primary, title=name, events=events)
-    _animation(scene, out, lambda t: control.bodies_at(t)[0])
+    write_animation(scene, out, lambda t: control.bodies_at(t)[0])

@@ -150,8 +150,8 @@ def torque_measure(
     reference_mask: Callable[[FloatArray], NDArray[np.bool_]] | None,
 ) -> TorqueMeasure:
     """The measure of a validated body scene; ``motions`` from
-    :func:`clothfem.runners.body_motions`; ``reference_mask`` the hinge ``beyond_joint``
-    selector (:func:`clothfem.runners._aj_mask`)."""
+    :func:`clothfem.scene_body.body_motions`; ``reference_mask`` the hinge ``beyond_joint``
+    selector (:func:`clothfem.scene_body.aj_mask`)."""
     c, body = scene["contact"], scene["body"]
     k = torque_segment_index(scene)
     t_settle = scene["solver"]["settle_time"]

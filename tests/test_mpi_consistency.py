@@ -51,7 +51,7 @@ def test_rollup_same_on_two_ranks(tmp_path):
 
 _ONE_RANK_FAILS = """
 from mpi4py import MPI
-from clothfem.runners import _end_together
+from clothfem.run_output import end_together
 from clothfem.static import SolverDivergence
 comm = MPI.COMM_WORLD
 kind = {kind!r}
@@ -80,7 +80,7 @@ def test_an_error_on_one_rank_aborts_instead_of_hanging(tmp_path, kind):
     explicit run); an error every rank raises (a solver stop) passes the
     barrier and propagates normally on every rank."""
     script = tmp_path / "fail.py"
-    script.write_text(_ONE_RANK_FAILS.format(kind=kind, closing="_end_together(comm)"))
+    script.write_text(_ONE_RANK_FAILS.format(kind=kind, closing="end_together(comm)"))
     cmd = ["mpirun", "--allow-run-as-root", "--oversubscribe", "-n", "2", sys.executable]
     env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_"))}
     res = subprocess.run([*cmd, str(script)], capture_output=True, text=True, timeout=120, env=env)

@@ -76,7 +76,7 @@ def _model(scene: dict, fabric_from: tuple[int, int] | None, bending: str, scene
     from clothfem import particle as pm
     from clothfem.contact.film import FilmParameters
     from clothfem.run import build_material, build_mesh
-    from clothfem.runners import _bodies_at, body_motions
+    from clothfem.scene_body import body_motions, body_poses
 
     from .sleeve import _transfer
 
@@ -94,7 +94,7 @@ def _model(scene: dict, fabric_from: tuple[int, int] | None, bending: str, scene
     if fabric_from is not None:  # the spring constants of another mesh, class by class
         fab = _transfer(fab, net, fabric_of(_scene(scene_path, fabric_from, None, None)))
     (g,) = [ld["acceleration"] for ld in scene["loads"] if ld["type"] == "gravity"]
-    bodies_at = _bodies_at(scene, body_motions(scene))
+    bodies_at = body_poses(scene, body_motions(scene))
     params = FilmParameters(mu=scene["contact"]["mu"], kernel=scene["contact"]["kernel"])
     model = pm.ParticleModel(
         network=net,
@@ -123,12 +123,12 @@ def run_arm(
     tau . axis [N m], contact nodes) as it is made."""
     from clothfem import particle as pm
     from clothfem.contact.forces import joint_torque
-    from clothfem.runners import _plan, body_motions
+    from clothfem.scene_body import body_motions, run_plan
 
     t0 = time.perf_counter()
     scene = _scene(scene_path, mesh, angle, mu)
     model, net = _model(scene, constants_from, bending, scene_path)
-    plan = _plan(scene, body_motions(scene))
+    plan = run_plan(scene, body_motions(scene))
     aj = np.asarray(plan.aj(net.x0.T), dtype=bool)
     dt = safety * pm.stable_time_step(model)
     interval = scene["output"]["interval"]

@@ -48,7 +48,7 @@ def _model(scene: dict, motions: list):
     from clothfem import particle as pm
     from clothfem.contact.film import FilmParameters
     from clothfem.run import build_mesh
-    from clothfem.runners import _bodies_at
+    from clothfem.scene_body import body_poses
 
     from .donning import simple_fabric
 
@@ -67,7 +67,7 @@ def _model(scene: dict, motions: list):
         fabric=fab,
         gravity=tuple(g),
         damping=pm.Damping(alpha=scene["solver"]["settle_damping"]),
-        bodies=_bodies_at(scene, motions),
+        bodies=body_poses(scene, motions),
         contact=FilmParameters(mu=scene["contact"]["mu"], kernel=scene["contact"]["kernel"]),
     )
     return model, net
@@ -88,12 +88,12 @@ def walk(scene: dict, out: Path, *, safety: float = 0.9) -> dict:
     """Run the walk of a validated scene, writing the rows to ``out`` (module docstring);
     returns the cost (steps, dt [s], seconds)."""
     from clothfem import particle as pm
-    from clothfem.runners import _plan, body_motions, recorded_events
+    from clothfem.scene_body import body_motions, recorded_events, run_plan
 
     t0 = time.perf_counter()
     motions = body_motions(scene)
     model, net = _model(scene, motions)
-    plan = _plan(scene, motions)
+    plan = run_plan(scene, motions)
     measure = plan.measure
     fixed = measure.fixed_mask(net.x0)  # a hinge's beyond_joint set (else None)
     state = _start(scene, net, model)

@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from clothfem import scene as scenes
-from clothfem.runners import body_motions, keyframe_motion
+from clothfem.scene_body import body_motions, keyframe_motion
 
 ROOT = Path(__file__).resolve().parents[2]
 CI = ROOT / "demos" / "scenes" / "arm_sleeve_ci.toml"

@@ -9,7 +9,7 @@ from _gait import WALK, right_leg
 
 from clothfem import scene as scenes
 from clothfem.body.gait_repeat import gait_cycle
-from clothfem.runners import body_motions, contact_log
+from clothfem.scene_body import body_motions, contact_log
 
 
 def _scene(**extra) -> dict:

@@ -76,7 +76,7 @@ def test_torques_need_a_dynamic_integrator():
 
 
 def test_build_log_names_the_measures():
-    from clothfem.runners import contact_log
+    from clothfem.scene_body import contact_log
 
     s = _validate([{"name": "lk", "segment": "L_shank"}, {"name": "rh", "segment": "R_thigh"}])
     assert "torques: lk about L_shank, rh about R_thigh" in contact_log(s)

@@ -9,7 +9,7 @@ from _gait import WALK, right_leg
 from clothfem import scene as scenes
 from clothfem.body.gait_repeat import gait_cycle
 from clothfem.body.lower_body import read_gait_events
-from clothfem.runners import body_motions, contact_log, recorded_events
+from clothfem.scene_body import body_motions, contact_log, recorded_events
 from clothfem.torque_measure import TorqueMeasure, torque_measure
 
 SETTLE = 0.1

@@ -11,7 +11,7 @@ from mpi4py import MPI
 from clothfem import scene as scenes
 from clothfem.report import read_history
 from clothfem.run import run_scene
-from clothfem.runners import body_motions
+from clothfem.scene_body import body_motions
 
 COMM = MPI.COMM_WORLD
 CI = Path(__file__).resolve().parents[2] / "demos" / "scenes" / "arm_sleeve_ci.toml"

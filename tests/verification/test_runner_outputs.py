@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from clothfem import runners, simulation
 from clothfem import scene as scenes
+from clothfem import scene_body, simulation
 from clothfem.cli import main
 from clothfem.history import NAMES as HISTORY_NAMES
 from clothfem.history import UNITS_FILE
@@ -594,7 +594,7 @@ def test_mocap_scene(tmp_path):
     sets = ["solver.settle_time=0.01", "solver.ramp_time=0.01", "solver.duration=0.03"]
     sets += ["mesh.n_around=8", "mesh.n_along=4", "output.png=false"]
     scene = scenes.load(ROOT / "demos" / "scenes" / "sleeve_mocap.toml", sets)
-    motions = runners.body_motions(scene)
+    motions = scene_body.body_motions(scene)
     e1 = [motions[1].pose(t).rotation[:, 0] for t in (0.0, 0.8)]
     assert np.degrees(np.arccos(np.clip(e1[0] @ e1[1], -1, 1))) > 60  # 27 -> 114 deg flexion
     out = run_scene(scene, base / "mocap", comm=COMM)
