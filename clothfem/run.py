@@ -4,8 +4,9 @@ The log says what was built (and what was left out because the scene does not ne
 Dynamic scenes run through :func:`clothfem.simulation.run_dynamic`, quasi-static scenes
 with ``[[body]]`` segments through :func:`clothfem.runners.run_contact_scene`; a scene with
 ``[initial] don`` dons its pants first (:mod:`clothfem.particle.scene_donning`). A
-quasi-static scene without a body is solved here; its results go to ``out``: ``fabric.xdmf`` (ParaView, meshio), ``history.csv`` (one row per
-accepted step, flushed at once), ``final.png``. SIGTERM and Ctrl-C stop the run cleanly:
+quasi-static scene without a body is solved here; its results go to ``out``:
+``fabric.xdmf`` (ParaView, meshio), ``history.csv`` (one row per accepted step, flushed at
+once), ``final.png``. SIGTERM and Ctrl-C stop the run cleanly:
 files are closed and every step already written is kept; a run killed outright leaves
 readable files up to its last written step.
 
