@@ -11,12 +11,12 @@ with the scene's integrator and writes the same outputs for each. Its parts:
 * **State**: the integrator's arrays (positions, velocities, accelerations, directors,
   material histories, contact state: ``Integrator.state_arrays``) and the runner's counters
   (:class:`_Counters`), saved together in one ``.npz`` per rank
-  (:func:`clothfem.runners.save_checkpoint`) and restored by ``--resume``.
+  (:func:`clothfem.run_output.save_checkpoint`) and restored by ``--resume``.
 * **Integrators** behind one interface (:class:`Integrator`): ``explicit`` (central
   difference with forward-increment Lagrange multipliers, Sec. 3.2) and ``newmark``
-  (Newmark with Lagrange multipliers and an active set, Sec. 3.1.3). Each advances the state
-  step by step and hands every accepted step to the runner, with the contact forces on the
-  body per node (or per node-ellipsoid pair).
+  (Newmark with Lagrange multipliers and an active set, Sec. 3.1.3). The runner owns the
+  time loop: it asks for one accepted step at a time (``step``), then reads the step's
+  contact forces on the body per node (or per node-ellipsoid pair, ``body_forces``).
 * **Measures**, the same for every integrator: the Eq. 28 torque
   (:class:`clothfem.torque_measure.TorqueMeasure`), the ``[[torques]]`` table, the work of
   the measured joint (:class:`_JointWork`), energies and dissipation.
