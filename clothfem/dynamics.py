@@ -926,30 +926,92 @@ def integrate_implicit(
     (logged); below ``stepping.min_step`` raises :class:`DynamicsDivergence` after the
     accepted steps were passed to ``on_step``. Returns the accepted step records.
     """
-    s = _as_system(system)
-    lam_of = _load_fn(load)
-    x, v = _start(s, velocity)
-    lam0 = lam_of(0.0)
-    K0 = _initial_K0(s, x, damping)
-    a = _initial_acceleration(s, x, v, lam0, damping, K0, prefix)
-    st = _ImplicitStepper(s, scheme, damping, K0, prefix)
-    x.copy(st.xn)
-    v.copy(st.vn)
-    a.copy(st.an)
-    energy = _Energy(s, x, v, a, lam0, damping, K0, lumped=False)
-    s.commit(x)
-    af = scheme.alpha_f
-    t, h, step, records = 0.0, stepping.dt, 0, []
-    lam_n = lam0
-    span = stepping.t_end
-    while t < span * (1 - 1e-12):
-        h_try = min(h, span - t)
+    stepper = ImplicitStepper(
+        system,
+        stepping=stepping,
+        scheme=scheme,
+        load=load,
+        damping=damping,
+        velocity=velocity,
+        prefix=prefix,
+        rebase=rebase,
+    )
+    records = []
+    while not stepper.done:
+        rec = stepper.step()
+        records.append(rec)
+        log.info(rec.line())
+        if on_step is not None:
+            on_step(rec)
+    return records
+
+
+class ImplicitStepper:
+    """The implicit integration of :func:`integrate_implicit` one accepted step per
+    :meth:`step` call (Newton with cut-backs inside), from t = 0 or, to continue a run,
+    from ``time`` [s] after ``first_step`` steps with the state's ``velocity`` and
+    ``acceleration``, the step ``dt`` [s] in use and the ``work`` (external, damping) [J]
+    done so far; the state is the system's and ``v``, ``a``."""
+
+    def __init__(
+        self,
+        system: ShellModel | ShellSystem | LinearSystem,
+        *,
+        stepping: TimeStepping,
+        scheme: ImplicitScheme = ImplicitScheme(),
+        load: LoadFunction | None = None,
+        damping: Damping = Damping(),
+        velocity: PETSc.Vec | None = None,
+        acceleration: PETSc.Vec | None = None,
+        time: float = 0.0,
+        first_step: int = 0,
+        dt: float | None = None,
+        work: tuple[float, float] = (0.0, 0.0),
+        prefix: str = "dyn_",
+        rebase: float | None = 0.5,
+    ) -> None:
+        s = self.system = _as_system(system)
+        self.lam_of, self.stepping, self.rebase = _load_fn(load), stepping, rebase
+        x, v = _start(s, velocity)
+        self.lam_n = self.lam_of(time)
+        K0 = _initial_K0(s, x, damping)
+        if acceleration is None:
+            acceleration = _initial_acceleration(s, x, v, self.lam_n, damping, K0, prefix)
+        self.st = _ImplicitStepper(s, scheme, damping, K0, prefix)
+        x.copy(self.st.xn)
+        v.copy(self.st.vn)
+        acceleration.copy(self.st.an)
+        self.energy = _Energy(s, x, v, acceleration, self.lam_n, damping, K0, lumped=False)
+        self.energy.W_ext, self.energy.W_damp = (float(w) for w in work)
+        s.commit(x)
+        self.t, self.h = float(time), stepping.dt if dt is None else float(dt)
+        self.step_index = first_step
+
+    @property
+    def done(self) -> bool:
+        """Whether ``stepping.t_end`` is reached."""
+        return self.t >= self.stepping.t_end * (1 - 1e-12)
+
+    @property
+    def v(self) -> PETSc.Vec:
+        return self.st.vn
+
+    @property
+    def a(self) -> PETSc.Vec:
+        return self.st.an
+
+    def step(self) -> DynamicStep:
+        """One accepted step: a failed Newton solve restores the last accepted state and
+        retries with dt * cut; below ``stepping.min_step`` raises :class:`DynamicsDivergence`."""
+        s, st, stepping = self.system, self.st, self.stepping
+        t, af = self.t, st.sc.alpha_f
+        h_try = min(self.h, stepping.t_end - t)
         cutbacks = 0
         t0 = time.perf_counter()
         while True:
-            lam1 = lam_of(t + h_try)
-            lam_a = (1 - af) * lam1 + af * lam_n
-            st.fscale = energy.fscale
+            lam1 = self.lam_of(t + h_try)
+            lam_a = (1 - af) * lam1 + af * self.lam_n
+            st.fscale = self.energy.fscale
             s.set_time_step(h_try)
             ok, its, r0, r1 = st.solve(h_try, lam_a, lam1)
             if ok:
@@ -971,32 +1033,29 @@ def integrate_implicit(
                 raise DynamicsDivergence(
                     f"Newton failed at t = {t:.6g} with dt = {h_try / stepping.cut:.3g}: next dt "
                     f"{h_try:.3g} below dt_min {stepping.min_step:.3g} after {cutbacks} cut-backs "
-                    f"(last residual {r1:.3e}); {len(records)} accepted steps were delivered"
+                    f"(last residual {r1:.3e}); {self.step_index} accepted steps were delivered"
                     + rotation_note(s)
                 )
-        t += h_try
-        step += 1
+        self.t = t = t + h_try
+        self.step_index += 1
         s.commit(st.x)
-        K, U, W, Wd, diss = energy.advance(st.xn, st.x, st.v1, st.a1, lam1, h_try)
+        K, U, W, Wd, diss = self.energy.advance(st.xn, st.x, st.v1, st.a1, lam1, h_try)
         st.x.copy(st.xn)
         st.v1.copy(st.vn)
         st.a1.copy(st.an)
-        if rebase is not None and isinstance(s, ShellSystem):
-            s.rebase(st.xn, st.vn, st.an, threshold=rebase)
+        if self.rebase is not None and isinstance(s, ShellSystem):
+            s.rebase(st.xn, st.vn, st.an, threshold=self.rebase)
             st.xn.copy(st.x)
-        lam_n = lam1
+        self.lam_n = lam1
+        wall = time.perf_counter() - t0
         rec = DynamicStep(
-            step, t, h_try, lam1, its, r0, r1, cutbacks, K, U, W, Wd, diss, time.perf_counter() - t0
+            self.step_index, t, h_try, lam1, its, r0, r1, cutbacks, K, U, W, Wd, diss, wall
         )
-        records.append(rec)
-        log.info(rec.line())
-        if on_step is not None:
-            on_step(rec)
         if its <= stepping.easy_iterations and cutbacks == 0:
-            h = min(h_try * stepping.grow, stepping.max_step)
+            self.h = min(h_try * stepping.grow, stepping.max_step)
         else:
-            h = h_try
-    return records
+            self.h = h_try
+        return rec
 
 
 # ---------------------------------------------------------------------------- PETSc TS alpha2

@@ -548,11 +548,6 @@ def run_scene(
     ``out/summary.json`` says at the end whether the run completed (and why not).
     """
     out = Path(out)
-    if scene["solver"]["integrator"] == "newmark" and not scene["body"]:
-        raise SceneError(
-            "scene key 'solver.integrator': 'newmark' needs a body ([[body]] segments) in "
-            "this version; use 'explicit' or 'static' without one"
-        )
     if scene["solver"]["integrator"] != "static" and scene["material"]["rho"] <= 0:
         raise SceneError(
             f"scene key 'material.rho': the {scene['solver']['integrator']} integrator needs a "

@@ -568,7 +568,129 @@ class _Newmark:
         )
 
 
-INTEGRATORS: dict[str, type] = {"explicit": _Explicit, "newmark": _Newmark}
+@dataclass(frozen=True)
+class _ImplicitStart:
+    """Where an implicit run starts: t = 0 at rest, or a checkpoint's state (velocity and
+    acceleration vectors, time [s], steps taken, step in use [s], external and damping
+    work [J])."""
+
+    v: Any = None
+    a: Any = None
+    t: float = 0.0
+    step: int = 0
+    h: float | None = None
+    work: tuple[float, float] = (0.0, 0.0)
+
+
+class _NewmarkFree:
+    """Newmark without a body (no contact): :class:`clothfem.dynamics.ImplicitStepper` with
+    gamma = ``solver.gamma``, beta = (gamma + 1/2)^2 / 4, steps of ``solver.dt`` cut on a
+    failed Newton solve down to ``solver.dt_min`` (default dt / 1024)."""
+
+    impulsive = False
+    label = "newmark run"
+    X = None
+
+    def __init__(self, scene, model: ShellModel, control: Control, comm, *, data) -> None:
+        from .dynamics import (
+            DynamicsDivergence,
+            ImplicitScheme,
+            ImplicitStepper,
+            ShellSystem,
+            TimeStepping,
+        )
+
+        self.failures = (DynamicsDivergence,)
+        self.model, self.control = model, control
+        sv = scene["solver"]
+        system = ShellSystem(model, rotary_scale=sv["rotary_scale"])
+        gamma = sv["gamma"]
+        self.cut = self.newton = 0  # totals of the run
+        start = self._restore(system, data) if data is not None else _ImplicitStart()
+        self.stepper = ImplicitStepper(
+            system,
+            stepping=TimeStepping(dt=sv["dt"], t_end=control.t_end, dt_min=sv["dt_min"]),
+            scheme=ImplicitScheme.newmark(beta=(gamma + 0.5) ** 2 / 4, gamma=gamma),
+            load=control.load,
+            velocity=start.v,
+            acceleration=start.a,
+            time=start.t,
+            first_step=start.step,
+            dt=start.h,
+            work=start.work,
+        )
+        self.last = None
+
+    def _restore(self, system, data) -> _ImplicitStart:
+        self.model.restore_arrays({k[6:]: data[k] for k in data if k.startswith("model_")})
+        v, a = system.create_vector(), system.create_vector()
+        v.getArray()[:], a.getArray()[:] = data["v"], data["a"]
+        self.cut, self.newton = int(data["run_cut"]), int(data["run_newton"])
+        return _ImplicitStart(
+            v=v,
+            a=a,
+            t=float(data["newmark_t"]),
+            step=int(data["run_step"]),
+            h=float(data["newmark_h"]),
+            work=(float(data["newmark_work_ext"]), float(data["newmark_work_damp"])),
+        )
+
+    @property
+    def done(self) -> bool:
+        return self.stepper.done
+
+    def step(self, *, ends_row: Callable[[float], bool]) -> StepInfo:
+        r = self.last = self.stepper.step()
+        self.cut += r.cutbacks
+        self.newton += r.newton_iterations
+        return StepInfo(time=r.time, dt=r.dt)
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        st, e = self.stepper, self.stepper.energy
+        data = {f"model_{k}": v for k, v in self.model.state_arrays().items()}
+        data.update(v=st.v.getArray(readonly=True).copy(), a=st.a.getArray(readonly=True).copy())
+        scalars = dict(newmark_t=st.t, newmark_h=st.h, newmark_work_ext=e.W_ext)
+        scalars.update(newmark_work_damp=e.W_damp, run_cut=self.cut, run_newton=self.newton)
+        return {**data, **{k: np.array(v) for k, v in scalars.items()}}
+
+    def body_forces(self) -> None:
+        return None
+
+    def pressure(self) -> None:
+        return None
+
+    def row(self, *, frame: bool) -> dict[str, float]:
+        r = self.last
+        return {
+            "load_factor": r.load_factor,
+            "n_active": 0,
+            "max_penetration": 0.0,
+            "sum_lam": 0.0,
+            "cutbacks": r.cutbacks,
+            "newton_iterations": r.newton_iterations,
+            "kinetic_energy": r.kinetic,
+            "strain_energy": r.strain,
+            "external_work": r.external_work,
+            "dissipation_total": 0.0,
+        }
+
+    def summary(self) -> dict[str, Any]:
+        return {"cutbacks": self.cut, "newton_iterations": self.newton}
+
+    def progress(self) -> str:
+        r = self.last
+        return (
+            f"kinetic energy {r.kinetic:.3e} J  dt {r.dt:.2e}  cut {r.cutbacks}  "
+            f"newton {r.newton_iterations}"
+        )
+
+
+def _integrator(scene: dict[str, Any]) -> type:
+    """The integrator class of a scene (Newmark without a body: no contact)."""
+    name = scene["solver"]["integrator"]
+    if name == "newmark" and not scene["body"]:
+        return _NewmarkFree
+    return {"explicit": _Explicit, "newmark": _Newmark}[name]
 
 
 class _Run:
@@ -748,7 +870,7 @@ def run_dynamic(
     plan = run_plan(scene, body_motions(scene))
     control = control_from_scene(scene, plan.motions, plan.t_end)
     data = load_checkpoint(out, comm) if resume else None
-    integ = INTEGRATORS[scene["solver"]["integrator"]](scene, model, control, comm, data=data)
+    integ = _integrator(scene)(scene, model, control, comm, data=data)
     run = _Run(scene, out, model=model, comm=comm, plan=plan, control=control, integ=integ,
                data=data, t0=t0, check_stop=check_stop, summary=summary)  # fmt: skip
     keep, after = (run.c.row, run.c.time) if resume else (None, None)
