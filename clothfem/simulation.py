@@ -286,6 +286,7 @@ class _Explicit:
             self.area = self.fc.mass / (model.material.rho * model.thickness)
         self.last = None
         self.wall = 0.0  # contact wall time up to the last row [s]
+        self.window = _NO_CONTACT  # the contact diagnostics of the last row
         self.stepper = self._stepper()
 
     def _stable_step(self) -> None:
@@ -304,15 +305,8 @@ class _Explicit:
 
     def _restore(self, data) -> None:
         from .dynamics import StableStep
-        from .scene import SceneError
 
-        self.model.restore_arrays({k[6:]: data[k] for k in data if k.startswith("model_")})
-        for k in ("v", "a"):
-            vec = self.system.create_vector()
-            if data[k].shape != vec.getArray().shape:
-                raise SceneError("--resume: the checkpoint does not match this mesh / ranks")
-            vec.getArray()[:] = data[k]
-            self.start[k] = vec
+        self.start["v"], self.start["a"] = _restore_motion(self.model, self.system, data)
         self.st = StableStep(
             *(float(data[f"st_{k}"]) for k in ("dt_crit", "omega_max", "dt_bound")),
             int(data["st_iterations"]),
@@ -374,8 +368,7 @@ class _Explicit:
         if self.sc is not None:  # the run's self-contact totals (summary)
             run.update(run_self_max=self.self_max, run_self_left=self.self_left)
         run.update({f"st_{k}": getattr(self.st, k) for k in StableStep.__dataclass_fields__})
-        data = {f"model_{k}": val for k, val in self.model.state_arrays().items()}
-        data.update(v=v.getArray(readonly=True).copy(), a=a.getArray(readonly=True))
+        data = _motion_arrays(self.model, v, a)
         return {**data, **{k: np.array(x) for k, x in run.items()}}
 
     def body_forces(self) -> BodyForces | None:
@@ -393,25 +386,22 @@ class _Explicit:
         h = self.fc.collect() if self.fc is not None else _NO_CONTACT  # collective
         pen_after = max(0.0, -h.min_gap_after) if math.isfinite(h.min_gap_after) else 0.0
         wall = self.fc.wall if self.fc is not None else 0.0
-        self.active, row = (
-            h.active,
-            {
-                "load_factor": r.load_factor,
-                "n_active": h.active,
-                "max_penetration": pen_after,
-                "predictor_penetration": h.max_penetration,
-                "sum_lam": h.sum_lambda,
-                "n_stick": h.n_stick,
-                "n_slip": h.active - h.n_stick,
-                "kinetic_energy": r.kinetic,
-                "strain_energy": r.strain,
-                "external_work": r.external_work,
-                "dissipation_total": self.fc.dissipation_total if self.fc is not None else 0.0,
-                "t_contact": wall - self.wall,
-                **self._self_contact_columns(frame=frame),
-            },
-        )
-        self.wall = wall
+        row = {
+            "load_factor": r.load_factor,
+            "n_active": h.active,
+            "max_penetration": pen_after,
+            "predictor_penetration": h.max_penetration,
+            "sum_lam": h.sum_lambda,
+            "n_stick": h.n_stick,
+            "n_slip": h.active - h.n_stick,
+            "kinetic_energy": r.kinetic,
+            "strain_energy": r.strain,
+            "external_work": r.external_work,
+            "dissipation_total": self.fc.dissipation_total if self.fc is not None else 0.0,
+            "t_contact": wall - self.wall,
+            **self._self_contact_columns(frame=frame),
+        }
+        self.wall, self.window = wall, h
         return row
 
     def _self_contact_columns(self, *, frame: bool) -> dict[str, float]:
@@ -447,10 +437,33 @@ class _Explicit:
     def progress(self) -> str:
         if self.fc is None:
             return f"kinetic energy {self.last.kinetic:.3e} J"
-        return f"active {self.active}"
+        return f"active {self.window.active}"
 
 
 _CLOCK = ("t_base", "step_base", "h", "n_end")
+
+
+def _motion_arrays(model: ShellModel, v, a) -> dict[str, np.ndarray]:
+    """The shell's state arrays (``model_*``) with the velocity and acceleration vectors."""
+    data = {f"model_{k}": val for k, val in model.state_arrays().items()}
+    data.update(v=v.getArray(readonly=True).copy(), a=a.getArray(readonly=True).copy())
+    return data
+
+
+def _restore_motion(model: ShellModel, system, data: dict[str, np.ndarray]) -> tuple:
+    """Inverse of :func:`_motion_arrays`: the shell restored, (v, a) as new vectors of
+    ``system`` (SceneError if the checkpoint is of another mesh or number of ranks)."""
+    from .scene import SceneError
+
+    model.restore_arrays({k[6:]: data[k] for k in data if k.startswith("model_")})
+    vectors = []
+    for k in ("v", "a"):
+        vec = system.create_vector()
+        if data[k].shape != vec.getArray().shape:
+            raise SceneError("--resume: the checkpoint does not match this mesh / ranks")
+        vec.getArray()[:] = data[k]
+        vectors.append(vec)
+    return tuple(vectors)
 
 
 @dataclass(frozen=True)
@@ -622,9 +635,7 @@ class _NewmarkFree:
         self.last = None
 
     def _restore(self, system, data) -> _ImplicitStart:
-        self.model.restore_arrays({k[6:]: data[k] for k in data if k.startswith("model_")})
-        v, a = system.create_vector(), system.create_vector()
-        v.getArray()[:], a.getArray()[:] = data["v"], data["a"]
+        v, a = _restore_motion(self.model, system, data)
         self.cut, self.newton = int(data["run_cut"]), int(data["run_newton"])
         return _ImplicitStart(
             v=v,
@@ -647,8 +658,7 @@ class _NewmarkFree:
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         st, e = self.stepper, self.stepper.energy
-        data = {f"model_{k}": v for k, v in self.model.state_arrays().items()}
-        data.update(v=st.v.getArray(readonly=True).copy(), a=st.a.getArray(readonly=True).copy())
+        data = _motion_arrays(self.model, st.v, st.a)
         scalars = dict(newmark_t=st.t, newmark_h=st.h, newmark_work_ext=e.W_ext)
         scalars.update(newmark_work_damp=e.W_damp, run_cut=self.cut, run_newton=self.newton)
         return {**data, **{k: np.array(v) for k, v in scalars.items()}}
