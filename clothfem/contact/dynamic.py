@@ -41,17 +41,15 @@ log = logging.getLogger("clothfem.contact.dynamic")
 BodiesAt = Callable[[float], tuple[Sequence, Sequence]]
 
 
-class _InertialModel:
-    """The shell model as seen from one Newmark step (all other attributes delegated)."""
+class _InertialOperator:
+    """The shell's residual and tangent plus the inertia of one Newmark step (the
+    :class:`clothfem.contact.lagrange.Operator` the contact solver solves)."""
 
     def __init__(self, system) -> None:
         self._system, self._model = system, system.model
         self._coef = 0.0  # 1 / (beta dt^2)
         self._xt = system.create_vector()
         self._tmp, self._Ma = self._xt.duplicate(), self._xt.duplicate()
-
-    def __getattr__(self, name: str):
-        return getattr(self._model, name)
 
     def set_step(self, xtilde: PETSc.Vec, coef: float) -> None:
         xtilde.copy(self._xt)
@@ -127,10 +125,12 @@ class DynamicContact:
         self.h: float | None = None  # current step [s] (adaptive), set by run()
         self.streak, self.grow_after = 0, 3
         self.bodies_at = bodies_at
-        self.view = _InertialModel(system)
+        self.view = _InertialOperator(system)
         geo, _ = bodies_at(0.0)
         params = params if params is not None else LagrangeContactParameters()
-        self.contact = LagrangeContact(self.view, geo, params=params, slaves=slaves)
+        self.contact = LagrangeContact(
+            system.model, geo, params=params, slaves=slaves, operator=self.view
+        )
         self.x = system.create_vector()
         system.get_state(self.x)
         self.v, self.a = self.x.duplicate(), self.x.duplicate()

@@ -76,7 +76,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import NoReturn
+from typing import NoReturn, Protocol
 
 import dolfinx.fem.petsc as fem_petsc
 import numpy as np
@@ -256,6 +256,15 @@ class ContactState:
     pressure: FloatArray
 
 
+class Operator(Protocol):
+    """The fabric's residual and tangent as the contact solver sees them (the model itself,
+    or e.g. the model plus the inertia of a Newmark step)."""
+
+    def residual(self, x: PETSc.Vec, f: PETSc.Vec) -> None: ...
+
+    def jacobian(self, x: PETSc.Vec, K: PETSc.Mat | None = None) -> PETSc.Mat: ...
+
+
 class LagrangeContact:
     """Frictional contact of a :class:`ShellModel` with a union of rigid, moving ellipsoids.
 
@@ -267,6 +276,7 @@ class LagrangeContact:
     params: :class:`LagrangeContactParameters`.
     slaves: optional ``f(X) -> bool mask`` of reference node coordinates (shape (3, N), like
         dolfinx locators) selecting the nodes that may touch; default all nodes.
+    operator: the residual and tangent solved for (:class:`Operator`); default the model's.
 
     Nodes whose three displacement components are all prescribed never enter the active set.
     """
@@ -278,10 +288,12 @@ class LagrangeContact:
         *,
         params: LagrangeContactParameters = LagrangeContactParameters(),
         slaves: Callable[[np.ndarray], np.ndarray] | None = None,
+        operator: Operator | None = None,
     ) -> None:
         if not isinstance(params, LagrangeContactParameters):
             raise ValueError("params must be a LagrangeContactParameters instance")
         self.model, self.params, self.comm = model, params, model.comm
+        self.operator: Operator = model if operator is None else operator
         self.bodies = [tuple(np.array(a, dtype=float) for a in b) for b in _check_bodies(bodies)]
         n = model.n_owned
         self.n = n
@@ -560,7 +572,7 @@ class LagrangeContact:
         max|bc error|), all norms reduced over ranks."""
         n = self.n
         t0 = time.perf_counter()
-        self.model.residual(xv, f)
+        self.operator.residual(xv, f)
         t1 = time.perf_counter()
         xa = xv.getArray(readonly=True)
         x = self.X + xa[: 3 * n].reshape(-1, 3)
@@ -592,7 +604,7 @@ class LagrangeContact:
         released fabric wrinkles).
 
         Returns (ok, iterations, lam, last friction evaluation)."""
-        m, p = self.model, self.params
+        p = self.params
         n = self.n
         f = xv.duplicate()
         free = np.ones(5 * n, dtype=bool)
@@ -622,7 +634,7 @@ class LagrangeContact:
             if its == p.max_newton:
                 break
             t0 = time.perf_counter()
-            self._K = m.jacobian(xv, self._K)
+            self._K = self.operator.jacobian(xv, self._K)
             t1 = time.perf_counter()
             kkt, where, in_use = self._kkt_matrix(nodes, bc_rows)
             ns = len(in_use)
@@ -987,7 +999,7 @@ class LagrangeContact:
         xv = m.create_vector()
         m.get_state(xv)
         f = xv.duplicate()
-        m.residual(xv, f)
+        self.operator.residual(xv, f)
         r = f.getArray(readonly=True).copy()
         r[: 3 * self.n] += self._forces_on_body().ravel()  # minus the force on the fabric
         return rows, r[rows]
