@@ -744,15 +744,6 @@ SCHEMA: dict[str, Section] = {
                 open_lo=True,
                 when=EXPLICIT,
             ),
-            "self_body_passes": Key(
-                "int",
-                "alternations of the body's and the fabric-fabric position projections per "
-                "step, so that a step ends satisfying both (0: the fabric-fabric correction "
-                "after FILM's alone)",
-                default=0,
-                lo=0,
-                when=EXPLICIT,
-            ),
         },
         "contact of the fabric with the body (only built with a [[body]])",
         optional=True,

@@ -208,24 +208,6 @@ class FilmContact:
         self._window = self._empty_window()
         return rec
 
-    def add_correction(self, dx: np.ndarray, body: np.ndarray, h: float) -> None:
-        """Add a later body projection of this step's positions, ``dx`` (n_owned, 3) [m] by
-        ellipsoid ``body`` (-1: none), to the step's contact forces, multipliers and
-        active nodes (the step of ``h`` [s])."""
-        moved = np.flatnonzero(np.any(dx != 0.0, axis=1))
-        if self.last is None or moved.size == 0:
-            return
-        f = self.mass[moved, None] * dx[moved] / (h * h)  # on the fabric [N]
-        last = self.last
-        force, lam_n, active, bodies = (
-            a.copy() for a in (last.force, last.lam_n, last.active, last.body)
-        )
-        force[moved] += f
-        lam_n[moved] += np.linalg.norm(f, axis=1)
-        active[moved] = True
-        bodies[moved] = np.where(body[moved] >= 0, body[moved], bodies[moved])
-        self.last = last._replace(force=force, lam_n=lam_n, active=active, body=bodies)
-
     def correct_velocities(self, v: PETSc.Vec) -> None:
         """Post-impact half-step velocities of the nodes corrected in this step (in place)."""
         if self.last is None:

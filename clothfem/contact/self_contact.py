@@ -37,7 +37,6 @@ dv_t``), so sticking layers do not creep.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -1292,9 +1291,7 @@ class SelfContactParameters:
     the response solver, "numba" (projected Gauss-Seidel over the pairs, compiled), "numpy"
     (accelerated projected Jacobi, vectorised) or "auto" (numba when importable);
     edge_proximity: edge-edge pairs closer than d are corrected too (else node-triangle
-    pairs only; edges then enter the crossing check alone); body_passes: with a body
-    projection (``outside`` of :func:`self_contact_step`), the most alternations of the
-    body projection and the pair projection per step (0: the pairs alone)."""
+    pairs only; edges then enter the crossing check alone)."""
 
     distance: float
     mu: float = 0.0
@@ -1306,7 +1303,6 @@ class SelfContactParameters:
     eps: float = 1e-3
     kernel: str = "auto"
     edge_proximity: bool = True
-    body_passes: int = 0
 
     def __post_init__(self) -> None:
         def bad(name, value, rule):
@@ -1324,8 +1320,6 @@ class SelfContactParameters:
             val = getattr(self, name)
             if int(val) != val or val < 1:
                 bad(name, val, "an integer >= 1")
-        if int(self.body_passes) != self.body_passes or self.body_passes < 0:
-            bad("body_passes", self.body_passes, "an integer >= 0")
         if not (0 < self.tolerance < 1):
             bad("tolerance", self.tolerance, "in (0, 1)")
         if not (0 < self.eps < 0.005):
@@ -1348,9 +1342,7 @@ class SelfContactResult(NamedTuple):
     the last; ``zone_nodes`` nodes moved as impact zones; ``rebuilt`` whether the candidate
     list was rebuilt; ``candidates`` the list (pass it to the next step); ``covered`` False
     when the capped skin could not cover a node's motion in the step (the crossing check
-    then saw only the pairs near the end of the step); with a body projection,
-    ``body_dx`` (N, 3) [m] the nodes' displacement by it and ``body_of`` (N,) the
-    ellipsoid that moved each node last (-1: none)."""
+    then saw only the pairs near the end of the step)."""
 
     x: FloatArray
     v: FloatArray
@@ -1367,13 +1359,6 @@ class SelfContactResult(NamedTuple):
     rebuilt: bool
     candidates: CandidateList
     covered: bool
-    body_dx: FloatArray | None = None
-    body_of: IntArray | None = None
-
-
-# ``outside(x, v)``: nodes within the body's contact offset moved onto it, their velocity
-# relative to the body's surface made non-approaching; (x, v, ellipsoid per node or -1)
-BodyProjection = Callable[[FloatArray, FloatArray], tuple[FloatArray, FloatArray, IntArray]]
 
 
 def _list_for(cands, x_now, x_other, surface, p: SelfContactParameters, both=True) -> tuple:
@@ -1411,14 +1396,10 @@ def self_contact_step(
     params: SelfContactParameters,
     fixed: ArrayLike | None = None,
     candidates: CandidateList | None = None,
-    outside: BodyProjection | None = None,
 ) -> SelfContactResult:
     """Self-contact correction of the predictor ``x_star`` (N, 3) [m] with half-step
     velocities ``v_star`` [m/s], from the crossing-free start ``x0`` of the step of ``dt``
-    [s], lumped ``mass`` (N,) [kg]; ``fixed`` (N,) nodes are not corrected. With
-    ``outside`` and ``params.body_passes`` > 0 the positions satisfy the body's contact
-    too: the body projection and the pair projection alternate until neither moves a node
-    (or the passes are used up; the pairs' projection then has the last word)."""
+    [s], lumped ``mass`` (N,) [kg]; ``fixed`` (N,) nodes are not corrected."""
     x0, xs, vs = (np.asarray(a, dtype=float) for a in (x0, x_star, v_star))
     n, p = surface.n_nodes, params
     if not (x0.shape == xs.shape == vs.shape == (n, 3)):
@@ -1436,18 +1417,10 @@ def self_contact_step(
     x, v = xs.copy(), vs.copy()
     lam, jn = np.zeros(len(c.gap)), np.zeros(len(c.gap))
     jt, stick = np.zeros((len(jn), 3)), np.ones(len(jn), dtype=bool)
-    k = {"passes": p.passes, "kernel": p.kernel}
     if len(c.gap):
+        k = {"passes": p.passes, "kernel": p.kernel}
         x, lam = project_positions(xs, c, inv_m, distance=d, tol=1e-3 * tol, **k)
-    joint = None
-    if outside is not None and p.body_passes > 0:
-        joint = _joint_projection(x0, x, v, c, cands, surface, inv_m, p, outside)
-        x, v, c, lam, cands2 = joint[:5]
-        rebuilt |= cands2 is not cands
-        cands = cands2
-        jn, jt, stick = np.zeros(len(lam)), np.zeros((len(lam), 3)), np.ones(len(lam), bool)
-    if len(c.gap):
-        v, jn = normal_impulses(v, c, inv_m, tol=1e-9 * _speed(vs), **k)
+        v, jn = normal_impulses(vs, c, inv_m, tol=1e-9 * _speed(vs), **k)
         if p.mu > 0:
             v1, jt, stick = friction_impulses(v, c, inv_m, jn, mu=p.mu, tol=1e-9 * _speed(vs), **k)
             x += dt * (v1 - v)
@@ -1458,35 +1431,7 @@ def self_contact_step(
         float(np.max(d - c.gap, initial=0.0)),
         float(np.min(_dot(_relative(x, c.idx, c.coef), c.normal), initial=np.inf)),
         found, left, zone, rebuilt or cands2 is not cands, cands2, covered and covered2,
-        *(() if joint is None else joint[5:]),
     )  # fmt: skip
-
-
-def _joint_projection(x0, x, v, c, cands, surface, inv_m, p: SelfContactParameters, outside):
-    """Alternate ``outside`` (the body) and the pair projection from the pair-projected
-    ``x``, the pairs taken anew at each body-moved state: positions, velocities, pairs,
-    their last multipliers, the candidate list, the body's displacement of each node and
-    the ellipsoid that moved it last."""
-    d, tol = p.distance, p.tolerance * p.distance
-    dx, body_of = np.zeros_like(x), np.full(len(x), -1, dtype=np.intp)
-    lam = np.zeros(len(c.gap))
-    for _ in range(p.body_passes):
-        xb, v, body = outside(x, v)
-        moved = np.flatnonzero(np.any(xb != x, axis=1))
-        if moved.size == 0:
-            break
-        dx[moved] += xb[moved] - x[moved]
-        body_of[moved] = body[moved]
-        x = xb
-        cands, _, _ = _list_for(cands, x, x0, surface, p)
-        c = _contacts_now(x0, x, surface, cands, d, tol, p.edge_proximity, p.kernel)
-        if len(c.gap) == 0 or float(np.min(c.gap)) >= d - 1e-3 * tol:
-            break
-        x, lam = project_positions(x, c, inv_m, distance=d, tol=1e-3 * tol, passes=p.passes,
-                                   kernel=p.kernel)  # fmt: skip
-    if len(lam) != len(c.gap):
-        lam = np.zeros(len(c.gap))
-    return x, v, c, lam, cands, dx, body_of
 
 
 _NO_PAIRS = PairContacts(
@@ -1670,37 +1615,16 @@ class SelfContact:
         v = v_pred.getArray(readonly=True)[: 3 * n].reshape(n, 3)
         x0 = self.X + self._gather(self.model.u.x.array[: 3 * n])
         xs, vs = self.X + self._gather(u), self._gather(v)
-        joint = self.film is not None and self.params.body_passes > 0
         res = self_contact_step(
             x0, xs, vs, self.mass, h, self.surface,
             params=self.params, fixed=self.fixed, candidates=self.candidates,
-            outside=self._outside(t, h) if joint else None,
         )  # fmt: skip
         self.candidates, self.last = res.candidates, res
         own = slice(lo, lo + n)
         moved = np.flatnonzero(np.any(res.x[own] != xs[own], axis=1))
         u[moved] = res.x[own][moved] - self.X[own][moved]
         self._v_own = res.v[own]
-        if res.body_dx is not None:
-            self.film.add_correction(res.body_dx[own], res.body_of[own], h)
         self._record(res, t, time.perf_counter() - t0)
-
-    def _outside(self, t: float, h: float) -> BodyProjection:
-        """The FILM body's projection of all nodes at ``t`` (frictionless: the first FILM
-        correction of the step applied the friction)."""
-        from .explicit import film_step
-
-        geo, vel = self.film.bodies_at(t)
-        fp = self.film.params
-
-        def project(x: FloatArray, v: FloatArray) -> tuple[FloatArray, FloatArray, IntArray]:
-            r = film_step(
-                x, v, self.mass, h, geo, body_velocities=vel, mu=0.0, offset=fp.offset,
-                max_passes=fp.max_passes, fixed=self.fixed, kernel=fp.kernel,
-            )  # fmt: skip
-            return r.x, r.v, r.body
-
-        return project
 
     def correct_velocities(self, v) -> None:
         """The corrected half-step velocities of the owned nodes (in place)."""
@@ -1777,6 +1701,4 @@ class SelfContact:
         d = contact.get("self_distance") or system.model.thickness
         mu = contact.get("self_mu")
         mu = contact.get("mu", 0.0) if mu is None else mu
-        passes = int(contact.get("self_body_passes", 0))
-        params = SelfContactParameters(distance=d, mu=mu, body_passes=passes)
-        return cls(system, params=params, film=film)
+        return cls(system, params=SelfContactParameters(distance=d, mu=mu), film=film)
