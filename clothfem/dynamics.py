@@ -1213,13 +1213,15 @@ def stable_time_step(
     q = z.getArray().copy()
     q[rows] = 0.0
     nrm = math.sqrt(_global_sum(s.comm, np.dot(q, s.lumped_mult(q))))
-    basis, mbasis = [], []  # Lanczos vectors q_j and M_L q_j (local rows)
+    # Lanczos vectors q_j as the columns of one array (filled in place: the
+    # reorthogonalisation reads its first k columns) and M_L q_j (local rows)
+    basis, mbasis = np.empty((len(q), iterations)), []
     alpha, beta = [], []
     lam_k, k, converged = 0.0, 0, False
     w = q / nrm if nrm > 0 else q
     for k in range(1, iterations + 1):  # noqa: B007
         qk = w
-        basis.append(qk)
+        basis[:, k - 1] = qk
         mbasis.append(s.lumped_mult(qk))
         z.setArray(qk)
         K.mult(z, y)
@@ -1230,9 +1232,9 @@ def stable_time_step(
         w[rows] = 0.0  # a fixed and a free row of a node, as for the clamps here)
         # full reorthogonalisation against every q_i (twice is enough), one reduction each
         for _ in range(2):
-            c = np.array([np.dot(mq, w) for mq in mbasis]) if basis else np.zeros(0)
+            c = np.array([np.dot(mq, w) for mq in mbasis])
             c = s.comm.allreduce(c, op=MPI.SUM)
-            w = w - np.stack(basis, axis=1) @ c
+            w = w - basis[:, :k] @ c
         b_k = math.sqrt(max(_global_sum(s.comm, np.dot(w, s.lumped_mult(w))), 0.0))
         if k == 1:
             theta, vecs = np.array(alpha), np.ones((1, 1))
