@@ -532,9 +532,17 @@ def _measures_lines(h: dict[str, np.ndarray], s: dict) -> list[str]:
 CRUSHED = -0.2  # yarn Green strain (stretch 0.77) below which the report warns
 
 
-def _crush_lines(h: dict[str, np.ndarray]) -> list[str]:
+def _element(s: dict) -> str | None:
+    """The element line of a run's build log (``summary.json`` "built"), if any."""
+    built = s.get("built")
+    lines = [b for b in built if isinstance(b, str)] if isinstance(built, list) else []
+    return next((b[len("element: ") :] for b in lines if b.startswith("element: ")), None)
+
+
+def _crush_lines(h: dict[str, np.ndarray], *, element: str | None = None) -> list[str]:
     """The yarn strain range of the run and, when some yarn was compressed below
-    :data:`CRUSHED`, a warning with the first angle where it happened."""
+    :data:`CRUSHED`, a warning with the first angle where it happened; ``element``: the
+    build log's element line (the warning names the causes that apply to it)."""
     lo, hi = h.get("min_yarn_strain"), h.get("max_yarn_strain")
     if lo is None or hi is None or lo.dtype.kind != "f" or not np.isfinite(lo).any():
         return []
@@ -546,11 +554,16 @@ def _crush_lines(h: dict[str, np.ndarray]) -> list[str]:
             where = f"t = {h['time'][bad[0]]:.3f} s"
         if "angle_deg" in h and np.ptp(h["angle_deg"]) > 0:
             where = f"{h['angle_deg'][bad[0]]:.1f} deg"
+        cause = (
+            "a fold the mesh does not resolve (MITC9 has no spurious membrane mode)"
+            if element is not None and element.startswith("MITC9")
+            else "a fold the mesh does not resolve, or the membrane mode of the partial "
+            "selective element (element.scheme = 'psri'; MITC9 has none: "
+            "docs/shell_element.md)"
+        )
         lines.append(
             f"- warning: a yarn is compressed below E = {CRUSHED} (stretch < 0.77) at some "
-            f"integration point from {where} on: a fold the mesh does not resolve, or the "
-            "membrane mode of the partial selective element (element.scheme = 'psri'; MITC9 "
-            "has none: docs/shell_element.md); results past there carry it"
+            f"integration point from {where} on: {cause}; results past there carry it"
         )
     return lines
 
@@ -572,6 +585,62 @@ def _intersection_lines(h: dict[str, np.ndarray]) -> list[str]:
             "any): self-contact cannot undo crossings a run starts with or is handed"
         )
     return lines
+
+
+def _where(h: dict[str, np.ndarray], i: int, *, by_time: bool) -> str:
+    """Row ``i`` as an angle (hinge runs) or a time."""
+    if not by_time and "angle_deg" in h:
+        return f"{h['angle_deg'][i]:.1f} deg"
+    return f"t = {h['time'][i]:.3f} s" if "time" in h else f"row {i + 1}"
+
+
+def _failsafe_lines(h: dict[str, np.ndarray], *, by_time: bool) -> list[str]:
+    """The self-contact fail-safe's work: rows where the proximity response let layers
+    cross (crossings found and undone by impact zones) and any crossing left."""
+    found, left = h.get("self_crossings"), h.get("self_crossings_left")
+    if found is None or found.dtype.kind != "f" or not np.isfinite(found).any():
+        return []
+    rows = np.flatnonzero(found > 0)
+    if rows.size == 0:
+        return ["- fabric crossings found by the self-contact fail-safe: none"]
+    lines = [
+        f"- fabric crossings found and undone by the self-contact fail-safe (the proximity "
+        f"response let layers cross): {int(np.nansum(found))} in {rows.size} of {found.size} "
+        f"rows, at most {int(np.nanmax(found))} in one, the first at "
+        f"{_where(h, int(rows[0]), by_time=by_time)}"
+    ]
+    if left is not None and left.dtype.kind == "f" and np.nanmax(left, initial=0.0) > 0:
+        bad = int(np.flatnonzero(left > 0)[0])
+        lines.append(
+            f"- warning: crossings left after the fail-safe from "
+            f"{_where(h, bad, by_time=by_time)} on: the fabric passes through itself there"
+        )
+    return lines
+
+
+KE_JUMP = 20.0  # kinetic energy / median over the motion before it that the report flags
+KE_BASE_ROWS = 10  # motion rows the median needs before a jump is judged
+
+
+def _energy_lines(h: dict[str, np.ndarray]) -> list[str]:
+    """A hinge run's first motion row whose fabric kinetic energy exceeds :data:`KE_JUMP`
+    times the median of the motion rows before it (at least :data:`KE_BASE_ROWS` of them):
+    a dynamic event the prescribed motion does not explain."""
+    ke, stage = h.get("kinetic_energy"), h.get("stage")
+    if ke is None or stage is None or ke.dtype.kind != "f":
+        return []
+    rows = np.flatnonzero((stage == "motion") & np.isfinite(ke))
+    for k in range(KE_BASE_ROWS, rows.size):
+        base = float(np.median(ke[rows[:k]]))
+        if base > 0 and ke[rows[k]] > KE_JUMP * base:
+            return [
+                f"- warning: the fabric's kinetic energy jumps to {ke[rows[k]]:.3g} J at "
+                f"{_where(h, int(rows[k]), by_time=False)}, {ke[rows[k]] / base:.0f} x the "
+                f"median of the motion before ({base:.3g} J): a snap or a breakdown of the "
+                "contact or the element, not the steady resistance; read the torque past "
+                "there with it"
+            ]
+    return []
 
 
 def _torques_lines(s: dict) -> list[str]:
@@ -654,7 +723,9 @@ def report_markdown(run_dir: str | Path) -> str:
     lines += _measures_lines(h, s)
     lines += _torques_lines(s)
     lines += _intersection_lines(h)
-    lines += _crush_lines(h)
+    lines += _failsafe_lines(h, by_time=recorded)
+    lines += _crush_lines(h, element=_element(s))
+    lines += [] if recorded else _energy_lines(h)
     flex = torque_curve(h, "torque_flex")[1] if "torque_flex" in h else None
     if recorded:  # at the gait events (else every 0.25 s)
         events = [(t, f"{c} {lb}") for t, c, lb in _events(run_dir) if a[0] <= t <= a[-1]]
