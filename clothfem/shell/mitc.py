@@ -423,11 +423,13 @@ def _geometric(K, s, tabs):
 
 
 @numba.njit(cache=True)
-def _cell(out, coef, const, coords, mode, tabs):
+def _cell(out, coef, const, coords, mode, tabs, strains):
     """One output of a cell (``mode``): its membrane or shear energy or the residual (u_a,
     d_a node by node), added to ``out``, or for any Jacobian mode the whole 54 x 54 matrix,
     written to ``out`` (:func:`_jacobian`). ``tabs``: (w, dNq, (P0, P1, P2), (N0, N1, N2),
-    (dN0, dN1, dN2)) of :func:`tying_tables`."""
+    (dN0, dN1, dN2)) of :func:`tying_tables`. With material terms and ``strains`` of 27
+    values, the lamina strains (E11, E22, E12) of every point are written there too (as
+    :func:`_lamina_strains` computes them)."""
     w, Ps = tabs[0], tabs[2]
     sets = (0, 1, 2, 0, 1)  # the tying set of each component (e_rr, e_ss, e_rs, g_r, g_s)
     off, ne = _offsets(Ps[0], Ps[1], Ps[2])
@@ -468,6 +470,9 @@ def _cell(out, coef, const, coords, mode, tabs):
             scale = coef[o + 9] * const[11]
             for i in range(3):
                 L[i] = A[i, 0] * E[0] + A[i, 1] * E[1] + A[i, 2] * E[2]
+            if strains.size == 27:
+                strains[3 * qp], strains[3 * qp + 1] = L[0], L[1]
+                strains[3 * qp + 2] = L[2] * 0.5
             phi = _law(L, const, coef, qp, sig, tan)
             if mode == ENERGY_MEMBRANE:
                 energy += scale * phi
@@ -540,10 +545,12 @@ _TABS_MITC9, _TABS_FULL = _TABS["mitc9"], _TABS["full"]
 #: constants, after the model's 15 (Q, kG, t, warp); then the material terms of
 #: :func:`_law` (decrimping 6, friction 4, viscosity 3 and 1 / h) and the layout: LAW (1 if
 #: any term), the offsets of the friction and viscosity histories among the coefficients
-#: (-1: none), CELL the offset of the local cell number (the last coefficient) and CACHE the
-#: address of the Jacobian cache (:attr:`MitcForms.K`; an address is below 2^53, exact).
-MODE, TYING, LAW, CELL, CACHE = 15, 16, 31, 34, 35
-N_CONST = 36
+#: (-1: none), CELL the offset of the local cell number (the last coefficient), CACHE the
+#: address of the Jacobian cache (:attr:`MitcForms.K`; an address is below 2^53, exact) and
+#: STRAINS the address where the residual writes the lamina strains of every cell's points
+#: for the histories' commit (0: nowhere; :meth:`MitcForms.history_strains`).
+MODE, TYING, LAW, CELL, CACHE, STRAINS = 15, 16, 31, 34, 35, 36
+N_CONST = 37
 #: The coefficients: u, d, D (27 each), the point stiffness (81); with material terms the
 #: point frames (10 a point, :func:`_cell_frames`), the friction history (4 a point) and the
 #: viscosity history (3 a point) where present; the local cell number.
@@ -580,12 +587,12 @@ def _cache_entry(coef, const, coords):
 
 
 @numba.njit(cache=True)
-def _compute(out, coef, const, coords, mode):
+def _compute(out, coef, const, coords, mode, strains):
     """:func:`_cell` with the tables of the form's tying scheme."""
     if const[TYING] == 0.0:
-        _cell(out, coef, const, coords, mode, _TABS_MITC9)
+        _cell(out, coef, const, coords, mode, _TABS_MITC9, strains)
     else:
-        _cell(out, coef, const, coords, mode, _TABS_FULL)
+        _cell(out, coef, const, coords, mode, _TABS_FULL, strains)
 
 
 @numba.cfunc(_SIGNATURE, nopython=True, cache=True)
@@ -600,12 +607,18 @@ def _kernel(A_, w_, c_, coords_, local_index, permutation):
     coef = numba.carray(w_, (N_COEF,))
     coords = numba.carray(coords_, (27,))
     mode = int(const[MODE])
+    none = np.empty(0)
+    if mode == R_UD and const[STRAINS] != 0.0:
+        cell = int(coef[int(const[CELL])])
+        strains = numba.carray(_pointer(int(const[STRAINS]) + 8 * 27 * cell), (27,))
+        _compute(out, coef, const, coords, mode, strains)
+        return
     if mode < K_UU:
-        _compute(out, coef, const, coords, mode)
+        _compute(out, coef, const, coords, mode, none)
         return
     K, cached = _cache_entry(coef, const, coords)
     if not cached:
-        _compute(K, coef, const, coords, mode)
+        _compute(K, coef, const, coords, mode, none)
     first = 54 * 27 * ((mode - K_UU) // 2) + 27 * ((mode - K_UU) % 2)  # the block's K[0, 0]
     for i in range(27):
         out[27 * i : 27 * i + 27] += K[first + 54 * i : first + 54 * i + 27]
@@ -687,6 +700,12 @@ class MitcForms:
         scheme = fem.Constant(mesh, float(list(_TABS).index(tying)))
         self._constants = [scheme, *law, layout]  # kept alive with the forms
         self._layout, self._n_cells, self._cache = layout, n_cells, None
+        self._strains = None  # the residual's lamina strains, (cells, 27), for the histories
+        if friction is not None or viscosity is not None:
+            self._strains = np.full((n_cells, 27), np.nan)
+            values = layout.value.copy()
+            values[STRAINS - LAW] = self._strains.ctypes.data
+            layout.value = values
 
         def form(mode: int, spaces: list):
             self._constants.append(fem.Constant(mesh, float(mode)))
@@ -724,7 +743,8 @@ class MitcForms:
     @staticmethod
     def _law_constants(mesh, yarn, friction, viscosity) -> tuple[list, fem.Constant]:
         """The constants of :func:`_law` (zeros for an absent term) and the layout
-        (LAW, friction offset, viscosity offset, cell number offset, cache address 0)."""
+        (LAW, friction offset, viscosity offset, cell number offset, cache address 0,
+        strains address 0)."""
         law = [
             yarn if yarn is not None else fem.Constant(mesh, np.zeros((2, 3))),
             friction.k if friction is not None else fem.Constant(mesh, np.zeros((2, 2))),
@@ -736,7 +756,7 @@ class MitcForms:
         for history, dim in ((friction, 4), (viscosity, 3)):
             layout.append(float(offset) if history is not None else -1.0)
             offset += 9 * dim if history is not None else 0
-        return law, fem.Constant(mesh, np.array([*layout, float(offset), 0.0]))
+        return law, fem.Constant(mesh, np.array([*layout, float(offset), 0.0, 0.0]))
 
     def _coords(self, n_cells: int) -> np.ndarray:
         """The node coordinates of the first ``n_cells`` local cells, (n_cells, 27)."""
@@ -758,11 +778,18 @@ class MitcForms:
         """(E11, E22) of :meth:`lamina_strains`, (cells, 9, 2)."""
         return self.lamina_strains()[:, :, :2]
 
-    def history_strains(self, components: int) -> np.ndarray:
+    def history_strains(self, components: int, *, at_residual: bool = False) -> np.ndarray:
         """The first ``components`` of :meth:`lamina_strains` in the point order of the
         histories (the Quadrature functions of the rule of degree 4: point (r_i, s_j) is
-        3 i + j), (owned cells, 9, components)."""
-        e = self.lamina_strains()[:, :, :components]
+        3 i + j), (owned cells, 9, components). ``at_residual``: the state is the one of
+        the last residual assembly, whose kernels wrote these strains (the same operations:
+        the same values), so they are read instead of evaluated again (a model with
+        material histories only)."""
+        n = len(self._owned_coords)
+        if at_residual and self._strains is not None:
+            e = self._strains[:n].reshape(n, 9, 3)[:, :, :components]
+        else:
+            e = self.lamina_strains()[:, :, :components]
         return np.ascontiguousarray(e.reshape(-1, 3, 3, components).transpose(0, 2, 1, 3)).reshape(
             -1, 9, components
         )

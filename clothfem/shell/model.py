@@ -427,7 +427,10 @@ class ShellModel:
         ):
             histories[name] = None if term is None else cls(
                 mesh, term, eps, self.t, degree=MITC_DEGREE, dx=dx_m,
-                point_strains=lambda k=comps: self._mitc.history_strains(k),
+                # read from the residual's kernels when they ran at this state
+                point_strains=lambda k=comps: self._mitc.history_strains(
+                    k, at_residual=self._Rw_at is not None
+                ),
             )  # fmt: skip
         self.friction, self.viscosity = histories["friction"], histories["viscosity"]
         self._mitc = MitcForms(

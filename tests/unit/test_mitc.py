@@ -323,3 +323,37 @@ def test_mitc9_taylor_with_the_material_terms(panel):
     steps = (1e-3, 5e-4, 2.5e-4)
     assert min(energy_orders(model, x, dx, steps, model.strain_energy)) > 1.9
     assert min(jacobian_orders(model, x, dx, steps)) > 1.9
+
+
+def test_commit_reads_the_residuals_strains_at_its_state_only(panel):
+    """With material histories the residual's kernels also write the lamina strains of every
+    point; a commit at the residual's state reads them, and a commit at a state set
+    afterwards evaluates them again. The written strains are the evaluated ones to
+    round-off: the same operations in two compiled functions, which the host's fused
+    multiply-add may round differently (with NUMBA_CPU_NAME=generic they are equal bit for
+    bit)."""
+    a, b = (ShellModel(panel, material=LAWS, thickness=0.01, quadrature=MITC9) for _ in "ab")
+    x0 = random_state(a, 0.02, 7)
+    for m in (a, b):
+        _with_history(m, x0, 8)
+    x1, x2 = random_state(a, 0.05, 9), random_state(a, 0.05, 10)
+    r, fe = x1.duplicate(), x1.duplicate()
+    a.forces(x1, r, fe)  # the residual at x1: the kernels wrote its strains
+    cached = a._mitc.history_strains(3, at_residual=True)
+    evaluated = a._mitc.history_strains(3)
+    assert np.abs(cached - evaluated).max() <= 1e-13 * np.abs(evaluated).max()
+    a.commit_material()
+    b.set_state(x1)  # no residual at x1: the strains evaluated
+    b.commit_material()
+    for h in ("friction", "viscosity"):
+        ha, hb = (getattr(m, h).history.x.array for m in (a, b))
+        assert np.abs(ha - hb).max() <= 1e-12 * np.abs(hb).max()
+    a.forces(x1, r, fe)
+    a.set_state(x2)  # a new state after the residual: the written strains are stale
+    for h in ("friction", "viscosity"):  # the same histories before the commit at x2
+        getattr(a, h).history.x.array[:] = getattr(b, h).history.x.array
+    a.commit_material()
+    b.set_state(x2)
+    b.commit_material()
+    for h in ("friction", "viscosity"):  # both evaluated at x2: equal bit for bit
+        assert np.array_equal(getattr(a, h).history.x.array, getattr(b, h).history.x.array)
