@@ -42,13 +42,16 @@ BodiesAt = Callable[[float], tuple[Sequence, Sequence]]
 
 
 class _InertialModel:
-    """The shell model as seen from one Newmark step (all other attributes delegated)."""
+    """The shell model as seen from one Newmark step (all other attributes delegated), with
+    the fabric self-contact barrier's terms when one is given."""
 
-    def __init__(self, system) -> None:
+    def __init__(self, system, barrier=None) -> None:
         self._system, self._model = system, system.model
+        self._barrier = barrier
         self._coef = 0.0  # 1 / (beta dt^2)
         self._xt = system.create_vector()
         self._tmp, self._Ma = self._xt.duplicate(), self._xt.duplicate()
+        self._K: PETSc.Mat | None = None  # the shell's own tangent under a barrier
 
     def __getattr__(self, name: str):
         return getattr(self._model, name)
@@ -64,15 +67,20 @@ class _InertialModel:
         self._tmp.scale(self._coef)  # a(x)
         self._system.mass_mult(self._tmp, self._Ma)
         f.axpy(1.0, self._Ma)
+        if self._barrier is not None:
+            self._barrier.add_residual(x, f)
 
     def jacobian(self, x: PETSc.Vec, K: PETSc.Mat | None = None) -> PETSc.Mat:
-        K = self._model.jacobian(x, K)
+        if self._barrier is not None:  # K is the barrier's matrix: the shell's is kept here
+            K = self._K = self._model.jacobian(x, self._K)
+        else:
+            K = self._model.jacobian(x, K)
         K.axpy(
             self._coef,
             self._system.mass_matrix(),
             structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN,
         )
-        return K
+        return K if self._barrier is None else self._barrier.jacobian(x, K)
 
 
 @dataclass(frozen=True)
@@ -104,7 +112,10 @@ class DynamicContact:
     ``rebase`` [rad]: after every accepted step, nodes rotated by more than this are re-based
     on their current director (:meth:`ShellSystem.rebase`); None never re-bases.
     ``non_resilient``: after every step the nodes in contact take the body's normal velocity
-    (:meth:`_stick_normal`); False keeps plain Newmark velocities."""
+    (:meth:`_stick_normal`); False keeps plain Newmark velocities.
+    ``barrier``: fabric self-contact (:class:`clothfem.contact.self_barrier.SelfBarrier` on
+    the same system): its energy joins every step's Newton system and its step filter the
+    line search; None: no self-contact."""
 
     def __init__(
         self,
@@ -117,6 +128,7 @@ class DynamicContact:
         slaves=None,
         rebase: float | None = 0.5,
         non_resilient: bool = True,
+        barrier=None,
     ) -> None:
         if not (0 < beta <= 0.5):
             raise ValueError(f"DynamicContact beta must be in (0, 0.5], got {beta!r}")
@@ -127,10 +139,17 @@ class DynamicContact:
         self.h: float | None = None  # current step [s] (adaptive), set by run()
         self.streak, self.grow_after = 0, 3
         self.bodies_at = bodies_at
-        self.view = _InertialModel(system)
+        self.barrier = barrier
+        self.view = _InertialModel(system, barrier)
         geo, _ = bodies_at(0.0)
         params = params if params is not None else LagrangeContactParameters()
-        self.contact = LagrangeContact(self.view, geo, params=params, slaves=slaves)
+        self.contact = LagrangeContact(
+            self.view,
+            geo,
+            params=params,
+            slaves=slaves,
+            step_filter=barrier.max_step if barrier is not None else None,
+        )
         self.x = system.create_vector()
         system.get_state(self.x)
         self.v, self.a = self.x.duplicate(), self.x.duplicate()
