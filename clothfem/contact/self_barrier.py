@@ -64,8 +64,8 @@ the gradient to its owned rows; the Hessian's owned rows go into one AIJ matrix 
 fabric tangent's pattern joined with the 3x3 blocks of every node pair of the candidate list
 (fixed while the list is valid).
 
-Friction between layers is not modelled in this path (``contact.self_mu`` applies to the
-explicit one only).
+Friction between layers is not modelled in this path (the scene key ``contact.self_mu``
+belongs to the explicit integrator).
 """
 
 from __future__ import annotations
@@ -483,3 +483,12 @@ class SelfBarrier:
         x = self.positions()
         count = len(intersecting_pairs(x, self.surface.triangles)) if self.comm.rank == 0 else 0
         return int(self.comm.bcast(count, root=0))
+
+    @classmethod
+    def from_scene(cls, system, contact: dict) -> SelfBarrier | None:
+        """From a scene's ``contact`` section: None unless ``self_contact`` is true; the
+        activation distance ``self_distance`` [m] (default: the fabric thickness)."""
+        if not contact.get("self_contact", False):
+            return None
+        d = contact.get("self_distance") or system.model.thickness
+        return cls(system, params=SelfBarrierParameters(distance=d))
