@@ -14,9 +14,9 @@ active set at every pass. A barrier needs none of that: the pairs within the act
 distance simply add energy, gradient and Hessian to the step's residual and Jacobian, the
 set may change between iterates, and the step filter below guarantees that no iterate passes
 through the surface (which the active set cannot: an iterate between two passes may cross
-a layer and then be pulled back to the wrong side). Measured on the two pressed sheets of
-the verification (256 + 256 nodes, 2 kPa): the barrier step converges in the active-set
-loop's first pass with no cut-back (docs/contact.md).
+a layer and then be pulled back to the wrong side). Measured on the pressed sheets of the
+verification (81 + 49 nodes, 384 pairs within d at rest): 4-6 Newton iterations per step
+once the layers touch, one cut-back at the first impact, the force balance to 0.03 %.
 
 **The barrier** (Li et al., *Incremental Potential Contact*, 2020; the C2 clamped log
 barrier on the unsigned distance ``s`` of a pair):
