@@ -448,7 +448,7 @@ class SelfBarrier:
         for _ in range(31):
             xa1 = xa0 + alpha * D
             c = self._list(xa0, xa1, span=alpha * move)
-            ok = not (
+            ok = c.valid(xa0, xa1) and not (
                 point_triangle_crossings(xa0, xa1, self.surface, c.pt_node, c.pt_tri, eps).any()
                 or edge_edge_crossings(xa0, xa1, self.surface, c.ee, eps).any()
             )
