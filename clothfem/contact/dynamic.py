@@ -23,6 +23,7 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from petsc4py import PETSc
@@ -36,6 +37,9 @@ from .lagrange import (
 
 __all__ = ["DynamicContact", "DynamicContactRecord"]
 
+if TYPE_CHECKING:
+    from .self_barrier import SelfBarrier
+
 log = logging.getLogger("clothfem.contact.dynamic")
 
 BodiesAt = Callable[[float], tuple[Sequence, Sequence]]
@@ -45,7 +49,7 @@ class _InertialModel:
     """The shell model as seen from one Newmark step (all other attributes delegated), with
     the fabric self-contact barrier's terms when one is given."""
 
-    def __init__(self, system, barrier=None) -> None:
+    def __init__(self, system, barrier: SelfBarrier | None = None) -> None:
         self._system, self._model = system, system.model
         self._barrier = barrier
         self._coef = 0.0  # 1 / (beta dt^2)
@@ -128,7 +132,7 @@ class DynamicContact:
         slaves=None,
         rebase: float | None = 0.5,
         non_resilient: bool = True,
-        barrier=None,
+        barrier: SelfBarrier | None = None,
     ) -> None:
         if not (0 < beta <= 0.5):
             raise ValueError(f"DynamicContact beta must be in (0, 0.5], got {beta!r}")
