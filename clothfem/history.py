@@ -53,10 +53,22 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("joint_work", "J", "work of the measured joint against the garment, -int tau_seg . omega"),
     ("dissipation_total", "J", "energy dissipated by contact friction since the start"),
     ("dissipation_material", "J", "energy dissipated by the fabric (yarn friction, viscosity)"),
-    ("self_pairs", "-", "explicit self-contact: fabric-fabric pairs in contact, last step"),
-    ("self_min_gap", "m", "explicit self-contact: smallest pair gap after the corrections"),
-    ("self_crossings", "-", "explicit self-contact: crossing pairs the fail-safe found in the row"),
-    ("self_crossings_left", "-", "explicit self-contact: crossing pairs left after the fail-safe"),
+    (
+        "self_pairs",
+        "-",
+        "self-contact: fabric-fabric pairs in contact, last step (newmark: within the barrier)",
+    ),
+    (
+        "self_min_gap",
+        "m",
+        "self-contact: smallest pair gap after the corrections (newmark: of the last step)",
+    ),
+    (
+        "self_crossings",
+        "-",
+        "self-contact: crossing pairs the fail-safe found in the row (newmark: 0, filtered)",
+    ),
+    ("self_crossings_left", "-", "self-contact: crossing pairs left after the fail-safe"),
     ("self_zone_nodes", "-", "explicit self-contact: nodes moved in impact zones in the row"),
     (
         "self_intersections",

@@ -725,24 +725,28 @@ SCHEMA: dict[str, Section] = {
             ),
             "self_contact": Key(
                 "bool",
-                "fabric-fabric contact (clothfem.contact.self_contact: proximity corrections "
-                "after FILM, Coulomb friction between layers, a crossing fail-safe); false "
-                "builds nothing of it",
+                "fabric-fabric contact; explicit: clothfem.contact.self_contact (proximity "
+                "corrections after FILM, Coulomb friction between layers, a crossing "
+                "fail-safe); newmark: clothfem.contact.self_barrier (a log barrier in the "
+                "Newton system and a crossing step filter, frictionless); false builds "
+                "nothing of it",
                 default=False,
-                when=EXPLICIT,
+                when=DYNAMIC,
             ),
             "self_mu": Key(
                 "float",
-                "Coulomb coefficient between fabric layers (default: contact.mu)",
+                "Coulomb coefficient between fabric layers (default: contact.mu; newmark "
+                "self-contact is frictionless)",
                 lo=0.0,
                 when=EXPLICIT,
             ),
             "self_distance": Key(
                 "float",
-                "contact distance between mid-surfaces [m] (default: material.thickness)",
+                "contact distance between mid-surfaces [m] (default: material.thickness); "
+                "newmark: the barrier's activation distance",
                 lo=0.0,
                 open_lo=True,
-                when=EXPLICIT,
+                when=DYNAMIC,
             ),
         },
         "contact of the fabric with the body (only built with a [[body]])",

@@ -491,14 +491,20 @@ class _Newmark:
     def __init__(self, scene, model: ShellModel, control: Control, comm, *, data) -> None:
         from .contact.dynamic import DynamicContact
         from .contact.lagrange import ContactDivergence, LagrangeContactParameters
+        from .contact.self_barrier import SelfBarrier
         from .dynamics import ShellSystem
 
         self.failures = (ContactDivergence,)
         self.scene, self.model, self.control, self.comm = scene, model, control, comm
         c, sv = scene["contact"], scene["solver"]
         gamma = sv["gamma"]
+        system = ShellSystem(model, rotary_scale=sv["rotary_scale"])
+        # fabric self-contact (contact.self_contact): a barrier in every step's Newton system
+        self.sc = SelfBarrier.from_scene(system, c)
+        rank0_print(f"  self-contact: {'built' if self.sc is not None else 'not built'}")
+        self.self_max = 0
         self.dc = DynamicContact(
-            ShellSystem(model, rotary_scale=sv["rotary_scale"]),
+            system,
             control.bodies_at,
             params=LagrangeContactParameters(
                 mu=c["mu"],
@@ -508,6 +514,7 @@ class _Newmark:
             ),
             beta=(gamma + 0.5) ** 2 / 4,
             gamma=gamma,
+            barrier=self.sc,
         )
         self.contact = self.dc.contact
         self.X = self.contact.X
@@ -515,6 +522,8 @@ class _Newmark:
         if data is not None:
             self.dc.restore_arrays(data)
             self.cut, self.newton = int(data["run_cut"]), int(data["run_newton"])
+            if "run_self_max" in data:
+                self.self_max = int(data["run_self_max"])
         self.timers = dict(self.contact.timers)
         self.last = None
 
@@ -532,11 +541,14 @@ class _Newmark:
         return StepInfo(time=r.time, dt=r.dt)
 
     def state_arrays(self) -> dict[str, np.ndarray]:
-        return {
+        out = {
             **self.dc.state_arrays(),
             "run_cut": np.array(self.cut),
             "run_newton": np.array(self.newton),
         }
+        if self.sc is not None:
+            out["run_self_max"] = np.array(self.self_max)
+        return out
 
     def body_forces(self) -> BodyForces:
         nodes, body, f_pairs, _ = self.contact.pair_forces()  # per (node, ellipsoid) pair
@@ -569,10 +581,35 @@ class _Newmark:
             "t_assembly": tm["assembly"],
             "t_contact": tm["contact"],
             "t_solve": tm["solve"],
+            **self._self_contact_columns(frame=frame),
         }
 
+    def _self_contact_columns(self, *, frame: bool) -> dict[str, float]:
+        """The barrier's diagnostics at the row's step (its wall time since the last row,
+        part of t_assembly) and, at a field frame, the independent intersection count of the
+        written surface (collective)."""
+        if self.sc is None:
+            return {}
+        rec = self.sc.record()
+        row = {
+            "self_pairs": rec.pairs,
+            "self_min_gap": rec.min_distance if math.isfinite(rec.min_distance) else math.nan,
+            "self_crossings": 0,  # the step filter admits no crossing iterate
+            "self_crossings_left": 0,
+            "t_self_contact": rec.wall,
+        }
+        if frame:
+            t0 = time.perf_counter()
+            row["self_intersections"] = self.sc.intersections()
+            self.self_max = max(self.self_max, row["self_intersections"])
+            row["t_self_contact"] += time.perf_counter() - t0
+        return row
+
     def summary(self) -> dict[str, Any]:
-        return {"cutbacks": self.cut, "newton_iterations": self.newton}
+        out: dict[str, Any] = {"cutbacks": self.cut, "newton_iterations": self.newton}
+        if self.sc is not None:
+            out.update(self_intersections_max=self.self_max, self_crossings_left=0)
+        return out
 
     def progress(self) -> str:
         r, cr = self.last, self.last.contact

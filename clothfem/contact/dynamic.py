@@ -6,7 +6,7 @@ for the *dynamic* residual
     f_int(x) - f_ext(t) + M(x) a(x) + G^T lambda = 0,
     a(x) = (x - x~) / (beta dt^2),   x~ = x_n + dt v_n + dt^2 (1/2 - beta) a_n     (Newmark)
 
-by handing the contact solver a view of the shell model whose residual and Jacobian include
+by handing the contact solver an operator whose residual and Jacobian are the shell's plus
 the inertia of the step (Jacobian + M / (beta dt^2)); the active set, friction and the
 multipliers are the contact solver's own. After the step, v_{n+1} = v_n + dt ((1 - gamma) a_n
 + gamma a_{n+1}). The mass keeps the tangent positive definite through wrinkling, which is
@@ -23,6 +23,7 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from petsc4py import PETSc
@@ -36,6 +37,9 @@ from .lagrange import (
 
 __all__ = ["DynamicContact", "DynamicContactRecord"]
 
+if TYPE_CHECKING:
+    from .self_barrier import SelfBarrier
+
 log = logging.getLogger("clothfem.contact.dynamic")
 
 BodiesAt = Callable[[float], tuple[Sequence, Sequence]]
@@ -43,13 +47,16 @@ BodiesAt = Callable[[float], tuple[Sequence, Sequence]]
 
 class _InertialOperator:
     """The shell's residual and tangent plus the inertia of one Newmark step (the
-    :class:`clothfem.contact.lagrange.Operator` the contact solver solves)."""
+    :class:`clothfem.contact.lagrange.Operator` the contact solver solves), with the fabric
+    self-contact barrier's terms when one is given."""
 
-    def __init__(self, system) -> None:
+    def __init__(self, system, barrier: SelfBarrier | None = None) -> None:
         self._system, self._model = system, system.model
+        self._barrier = barrier
         self._coef = 0.0  # 1 / (beta dt^2)
         self._xt = system.create_vector()
         self._tmp, self._Ma = self._xt.duplicate(), self._xt.duplicate()
+        self._K: PETSc.Mat | None = None  # the shell's own tangent under a barrier
 
     def set_step(self, xtilde: PETSc.Vec, coef: float) -> None:
         xtilde.copy(self._xt)
@@ -62,15 +69,20 @@ class _InertialOperator:
         self._tmp.scale(self._coef)  # a(x)
         self._system.mass_mult(self._tmp, self._Ma)
         f.axpy(1.0, self._Ma)
+        if self._barrier is not None:
+            self._barrier.add_residual(x, f)
 
     def jacobian(self, x: PETSc.Vec, K: PETSc.Mat | None = None) -> PETSc.Mat:
-        K = self._model.jacobian(x, K)
+        if self._barrier is not None:  # K is the barrier's matrix: the shell's is kept here
+            K = self._K = self._model.jacobian(x, self._K)
+        else:
+            K = self._model.jacobian(x, K)
         K.axpy(
             self._coef,
             self._system.mass_matrix(),
             structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN,
         )
-        return K
+        return K if self._barrier is None else self._barrier.jacobian(x, K)
 
 
 @dataclass(frozen=True)
@@ -102,7 +114,10 @@ class DynamicContact:
     ``rebase`` [rad]: after every accepted step, nodes rotated by more than this are re-based
     on their current director (:meth:`ShellSystem.rebase`); None never re-bases.
     ``non_resilient``: after every step the nodes in contact take the body's normal velocity
-    (:meth:`_stick_normal`); False keeps plain Newmark velocities."""
+    (:meth:`_stick_normal`); False keeps plain Newmark velocities.
+    ``barrier``: fabric self-contact (:class:`clothfem.contact.self_barrier.SelfBarrier` on
+    the same system): its energy joins every step's Newton system and its step filter the
+    line search; None: no self-contact."""
 
     def __init__(
         self,
@@ -115,6 +130,7 @@ class DynamicContact:
         slaves=None,
         rebase: float | None = 0.5,
         non_resilient: bool = True,
+        barrier: SelfBarrier | None = None,
     ) -> None:
         if not (0 < beta <= 0.5):
             raise ValueError(f"DynamicContact beta must be in (0, 0.5], got {beta!r}")
@@ -125,11 +141,17 @@ class DynamicContact:
         self.h: float | None = None  # current step [s] (adaptive), set by run()
         self.streak, self.grow_after = 0, 3
         self.bodies_at = bodies_at
-        self.view = _InertialOperator(system)
+        self.barrier = barrier
+        self.view = _InertialOperator(system, barrier)
         geo, _ = bodies_at(0.0)
         params = params if params is not None else LagrangeContactParameters()
         self.contact = LagrangeContact(
-            system.model, geo, params=params, slaves=slaves, operator=self.view
+            system.model,
+            geo,
+            params=params,
+            slaves=slaves,
+            operator=self.view,
+            step_filter=barrier.max_step if barrier is not None else None,
         )
         self.x = system.create_vector()
         system.get_state(self.x)

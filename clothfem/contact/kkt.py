@@ -125,6 +125,11 @@ class BorderedMatrix:
         A.assemble()
         self.mat = A
 
+    def matches(self, K: PETSc.Mat) -> bool:
+        """Whether ``K`` has the nonzero pattern this matrix was built for."""
+        indptr, indices, _ = K.getValuesCSR()
+        return np.array_equal(indptr, self._k_indptr) and np.array_equal(indices, self._k_indices)
+
     def update(
         self,
         K: PETSc.Mat,
@@ -137,10 +142,9 @@ class BorderedMatrix:
         (m, 3) the multiplier columns, ``row`` (m, 3) the constraint rows, ``blocks``
         (m, 3, 3) the K_t blocks, per slot in the order of ``nodes``; ``active`` (m,) marks
         the slots in use (default all), the others get the row ``dlam = 0``."""
-        indptr, indices, kdata = K.getValuesCSR()
-        same = np.array_equal(indptr, self._k_indptr) and np.array_equal(indices, self._k_indices)
-        if not same:
+        if not self.matches(K):
             raise RuntimeError("the fabric tangent changed its sparsity pattern")
+        _, _, kdata = K.getValuesCSR()
         on = np.ones(len(self.nodes), dtype=bool) if active is None else np.asarray(active)
         col = np.where(on[:, None], col, 0.0)
         row = np.where(on[:, None], row, 0.0)

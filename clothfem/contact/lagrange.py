@@ -277,6 +277,9 @@ class LagrangeContact:
     slaves: optional ``f(X) -> bool mask`` of reference node coordinates (shape (3, N), like
         dolfinx locators) selecting the nodes that may touch; default all nodes.
     operator: the residual and tangent solved for (:class:`Operator`); default the model's.
+    step_filter: optional ``f(x0, dx) -> alpha`` (this rank's (u, theta) arrays; collective,
+        the same value on every rank): the largest admissible fraction of a Newton step,
+        where the line search starts (e.g. no fabric self-intersection along it).
 
     Nodes whose three displacement components are all prescribed never enter the active set.
     """
@@ -289,11 +292,13 @@ class LagrangeContact:
         params: LagrangeContactParameters = LagrangeContactParameters(),
         slaves: Callable[[np.ndarray], np.ndarray] | None = None,
         operator: Operator | None = None,
+        step_filter: Callable[[FloatArray, FloatArray], float] | None = None,
     ) -> None:
         if not isinstance(params, LagrangeContactParameters):
             raise ValueError("params must be a LagrangeContactParameters instance")
         self.model, self.params, self.comm = model, params, model.comm
         self.operator: Operator = model if operator is None else operator
+        self.step_filter = step_filter
         self.bodies = [tuple(np.array(a, dtype=float) for a in b) for b in _check_bodies(bodies)]
         n = model.n_owned
         self.n = n
@@ -526,6 +531,7 @@ class LagrangeContact:
         fits = (
             prev_bc is not None
             and np.array_equal(prev_bc, bc_rows)
+            and (kkt is None or kkt.matches(self._K))
             and len(slots) <= 2 * len(pairs) + 16
             and bool(np.isin(pairs, slots).all())
         )
@@ -667,7 +673,9 @@ class LagrangeContact:
                 return False, its, lam, fr
             x0 = xv.getArray(readonly=True).copy()
             lam0 = lam
-            alpha, used = 1.0, 1.0
+            # the largest admissible fraction of the step (e.g. no self-intersection)
+            alpha = 1.0 if self.step_filter is None else self.step_filter(x0, s[: 5 * n])
+            used = alpha
             for _ in range(8):  # backtracking: alpha = 1, 1/2, ..., 1/128
                 used = alpha
                 xv.getArray()[:] = x0 + alpha * s[: 5 * n]

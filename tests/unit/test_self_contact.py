@@ -175,7 +175,8 @@ def test_bad_parameters(kw, msg):
 
 def test_scene_keys_build_self_contact_only_when_asked():
     """contact.self_contact defaults to false (SelfContact.from_scene builds nothing); true
-    needs the explicit integrator; the distance defaults to the thickness, mu to contact.mu."""
+    is allowed with newmark too (then self_mu, explicit only, is refused) and static refuses
+    it; the distance defaults to the thickness, mu to contact.mu."""
     from pathlib import Path
 
     from clothfem import scene as scenes
@@ -186,8 +187,10 @@ def test_scene_keys_build_self_contact_only_when_asked():
     assert sc.SelfContact.from_scene(None, data["contact"]) is None
     on = scenes.load(path, ["contact.self_contact=true"])["contact"]
     assert on["self_contact"] is True and on["self_distance"] is None and on["self_mu"] is None
-    with pytest.raises(scenes.SceneError, match="contact.self_contact"):
-        scenes.load(path, ["contact.self_contact=true", "solver.integrator='newmark'"])
+    nm = ["solver.integrator='newmark'", "contact.self_contact=true"]
+    assert scenes.load(path, nm + ["contact.self_distance=2e-3"])["contact"]["self_contact"]
+    with pytest.raises(scenes.SceneError, match="contact.self_mu"):
+        scenes.load(path, nm + ["contact.self_mu=0.2"])
 
 
 @pytest.mark.parametrize("kernel", ["numpy", "auto"])

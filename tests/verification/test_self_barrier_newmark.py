@@ -1,0 +1,208 @@
+"""Fabric self-contact in the Newmark integrator (the barrier of
+:mod:`clothfem.contact.self_barrier` in :class:`clothfem.contact.dynamic.DynamicContact`):
+two sheets pressed together by a uniform pressure, a strip falling onto a fixed sheet
+under gravity. Every configuration is checked by the independent intersection checker
+(:mod:`clothfem.contact.intersections`); all assertions are on gathered or reduced values,
+so the file runs unchanged under ``mpirun -n 2``."""
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from clothfem import dynamics as dy
+from clothfem.contact.dynamic import DynamicContact
+from clothfem.contact.intersections import check_surface
+from clothfem.contact.self_barrier import SelfBarrier, SelfBarrierParameters, pair_energy
+from clothfem.mesh import load_msh
+from clothfem.shell import FabricMaterial, ShellModel
+from clothfem.shell.conditions import Clamp, Gravity, Pressure
+
+COMM = MPI.COMM_WORLD
+T = 1e-3  # thickness = activation distance d [m]
+L = 0.04  # bottom sheet [m]
+MAT = FabricMaterial(E1=1e5, E2=1e5, G12=2e4, rho=500.0)
+
+
+def far_body(t):
+    """A small sphere far from the fabric (DynamicContact needs a body)."""
+    return [(np.full(3, 10.0), np.eye(3), np.full(3, 1e-3))], [(np.zeros(3), np.zeros(3))]
+
+
+def _write_sheets(path, *, top, z0, n_bottom, n_top, shift, rise=0.0):
+    """A square bottom sheet [0, L]^2 at z = 0 (edges: physical group "edges") and a top
+    sheet ``top`` = (x0, x1, y0, y1) at z = z0 (z0 + ``rise`` along its edge x = x1),
+    shifted in plane by ``shift``; normals +z."""
+    import gmsh
+
+    gmsh.initialize()
+    gmsh.option.setNumber("General.Terminal", 0)
+    geo = gmsh.model.geo
+
+    def sheet(x0, x1, y0, y1, z, n, dz=0.0):
+        xy = ((x0, y0), (x1, y0), (x1, y1), (x0, y1))
+        p = [geo.addPoint(x, y, z + dz * (x == x1)) for x, y in xy]
+        lines = [geo.addLine(p[i], p[(i + 1) % 4]) for i in range(4)]
+        for ln in lines:
+            geo.mesh.setTransfiniteCurve(ln, n + 1)
+        s = geo.addPlaneSurface([geo.addCurveLoop(lines)])
+        geo.mesh.setTransfiniteSurface(s, cornerTags=p)
+        geo.mesh.setRecombine(2, s)
+        return s, lines
+
+    s0, edges = sheet(0.0, L, 0.0, L, 0.0, n_bottom)
+    x0, x1, y0, y1 = top
+    s1, _ = sheet(x0 + shift[0], x1 + shift[0], y0 + shift[1], y1 + shift[1], z0, n_top, rise)
+    geo.synchronize()
+    gmsh.model.addPhysicalGroup(2, [s0, s1], 1)
+    gmsh.model.addPhysicalGroup(1, edges, 1)
+    gmsh.model.setPhysicalName(1, 1, "edges")
+    gmsh.option.setNumber("Mesh.SecondOrderIncomplete", 0)
+    gmsh.model.mesh.generate(2)
+    gmsh.model.mesh.setOrder(2)
+    gmsh.write(str(path))
+    gmsh.finalize()
+
+
+def sheets(tmp, **kw):
+    path = COMM.bcast(tmp / "sheets.msh" if COMM.rank == 0 else None)
+    if COMM.rank == 0:
+        _write_sheets(path, **kw)
+    COMM.Barrier()
+    return load_msh(path, COMM)
+
+
+PRESSURE = 200.0  # [Pa] on both sheets, towards -z (a negative Pressure value)
+TOP = (0.005, 0.035, 0.005, 0.035)
+
+
+@pytest.fixture(scope="module")
+def pressed(tmp_path_factory):
+    tmp = COMM.bcast(tmp_path_factory.mktemp("pressed") if COMM.rank == 0 else None)
+    sm = sheets(tmp, top=TOP, z0=0.62 * T, n_bottom=4, n_top=3, shift=(0.0013, 0.0007))
+    model = ShellModel(
+        sm, material=MAT, thickness=T,
+        loads=[Pressure(-PRESSURE, follower=False)], supports=[Clamp("edges")],
+    )  # fmt: skip
+    system = dy.ShellSystem(model, rotary_scale=100.0)
+    barrier = SelfBarrier(system, params=SelfBarrierParameters(distance=T))
+    dc = DynamicContact(system, far_body, barrier=barrier, beta=0.49, gamma=0.9)
+    frames, recs = [], []
+
+    def on_step(r):
+        frames.append(barrier.positions())
+        recs.append((r, barrier.record()))
+
+    dc.run(t_end=0.2, dt=0.05, on_step=on_step)
+    return barrier, model, frames, recs
+
+
+def test_pressed_sheets_force_balance(pressed):
+    """At rest the fabric-fabric force on the top sheet (z-sum of the barrier gradient over
+    its nodes) equals the pressure on its area, p (0.03 m)^2 = 0.18 N, within 0.1 %; the sheets
+    are at rest (kinetic energy below 1e-9 J)."""
+    barrier, model, frames, recs = pressed
+    x = frames[-1]
+    bp = barrier.pairs(x)
+    _, grad, _, force = pair_energy(x, bp, params=barrier.params)
+    G = np.zeros_like(x)
+    np.add.at(G, bp.idx.ravel(), grad.reshape(-1, 3))
+    top = barrier.X[:, 2] > 0.5 * T
+    on_top = -G[top, 2].sum()  # barrier force on the top sheet, +z [N]
+    load = PRESSURE * (TOP[1] - TOP[0]) * (TOP[3] - TOP[2])
+    print(f"contact force on top {on_top:.6g} N, load {load:.6g} N, pairs {len(bp.dist)}")
+    assert abs(on_top - load) <= 1e-3 * load
+    assert recs[-1][0].kinetic_energy < 1e-9
+    assert recs[-1][1].pairs > 0
+
+
+def test_pressed_sheets_no_crossing(pressed):
+    """Every step intersection-free by the independent checker, the layers at least 0.5 d
+    apart, and the top sheet resting within d of the bottom one."""
+    barrier, _, frames, recs = pressed
+    for x in frames:
+        chk = check_surface(x, barrier.surface.triangles, radius=4 * T)
+        assert chk.intersections == 0
+        assert chk.min_distance >= 0.5 * T
+    dmin = recs[-1][1].min_distance
+    print(f"min distance {dmin:.4g} m, checker {chk.min_distance:.4g} m")
+    assert 0.5 * T <= dmin < T
+
+
+def drop(tmp, with_barrier: bool):
+    """The top sheet, tilted (3 mm to 5 mm above the clamped bottom one), falls under
+    gravity for 60 ms: positions of every accepted step."""
+    sm = sheets(tmp, top=TOP, z0=3 * T, n_bottom=4, n_top=3, shift=(0.0013, 0.0007), rise=2 * T)
+    model = ShellModel(
+        sm, material=MAT, thickness=T,
+        loads=[Gravity((0.0, 0.0, -9.81))], supports=[Clamp("edges")],
+    )  # fmt: skip
+    system = dy.ShellSystem(model, rotary_scale=100.0)
+    barrier = SelfBarrier(system, params=SelfBarrierParameters(distance=T))
+    dc = DynamicContact(
+        system, far_body, barrier=barrier if with_barrier else None, beta=0.49, gamma=0.9
+    )
+    frames = []
+    dc.run(t_end=0.06, dt=0.005, on_step=lambda r: frames.append(barrier.positions()))
+    return barrier, frames
+
+
+def test_sheet_dropped_onto_a_sheet(tmp_path_factory):
+    """No intersection and layers at least 0.25 d apart at every step while the tilted
+    sheet lands (corner first) and settles on the bottom one; the same fall without the
+    barrier ends with the top sheet below the bottom one (it passed through)."""
+    tmp = COMM.bcast(tmp_path_factory.mktemp("drop") if COMM.rank == 0 else None)
+    barrier, frames = drop(tmp, True)
+    tri = barrier.surface.triangles
+    low = min(check_surface(x, tri, radius=4 * T).min_distance for x in frames)
+    print(f"drop: {len(frames)} steps, smallest layer distance {low:.4g} m")
+    for x in frames:
+        assert check_surface(x, tri, radius=4 * T).intersections == 0
+    assert 0.25 * T <= low < T  # the sheets did meet
+    top = barrier.X[:, 2] > 0.5 * T
+    assert frames[-1][top, 2].mean() > frames[-1][~top, 2].mean()
+    _, free = drop(tmp, False)
+    assert free[-1][top, 2].mean() < free[-1][~top, 2].mean()
+
+
+def test_assembled_barrier_taylor(tmp_path_factory):
+    """The barrier's PETSc residual and Jacobian as assembled for the Newton solve (owned
+    rows, global columns; serial and 2 ranks) against its energy: along a random direction
+    of the u rows |E(x + h v) - E - h f.v| and |f(x + h v) - f - h K v| fall as h^2 (orders
+    > 1.8), with the layers 0.62 d apart."""
+    tmp = COMM.bcast(tmp_path_factory.mktemp("taylor") if COMM.rank == 0 else None)
+    sm = sheets(tmp, top=TOP, z0=0.62 * T, n_bottom=4, n_top=3, shift=(0.0013, 0.0007))
+    model = ShellModel(sm, material=MAT, thickness=T, supports=[Clamp("edges")])
+    system = dy.ShellSystem(model)
+    barrier = SelfBarrier(system, params=SelfBarrierParameters(distance=T))
+    x = system.create_vector()
+    system.get_state(x)
+    n = model.n_owned
+    v = x.duplicate()
+    rng = np.random.default_rng(5 + COMM.rank)
+    v.set(0.0)
+    v.getArray()[: 3 * n] = rng.normal(size=3 * n) * 2e-5
+
+    def grad(y):
+        f = y.duplicate()
+        f.set(0.0)
+        barrier.add_residual(y, f)
+        return f
+
+    K = system.jacobian(x)
+    H = barrier.jacobian(x, K).copy()
+    H.axpy(-1.0, K, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+    e0, f0 = barrier.energy(x), grad(x)
+    assert barrier.record().pairs > 50
+    Hv = x.duplicate()
+    H.mult(v, Hv)
+    e1, e2 = [], []
+    for h in (0.5**k for k in range(5)):
+        xh = x.copy()
+        xh.axpy(h, v)
+        e1.append(abs(barrier.energy(xh) - e0 - h * f0.dot(v)))
+        e2.append((grad(xh) - f0 - h * Hv).norm())
+    o1, o2 = np.log2(np.array(e1[:-1]) / e1[1:]), np.log2(np.array(e2[:-1]) / e2[1:])
+    if COMM.rank == 0:
+        print(f"assembled Taylor orders: energy {np.round(o1, 2)}, residual {np.round(o2, 2)}")
+    assert np.all(o1 > 1.8) and np.all(o2 > 1.8)
