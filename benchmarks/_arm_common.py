@@ -52,6 +52,7 @@ from clothfem.report import curve_error, moving_average, read_history
 from clothfem.report import torque_curve as report_torque_curve
 from clothfem.scene import SceneError, apply_overrides, foreign_keys
 from clothfem.scene import load as load_scene
+from clothfem.spec import to_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "demos" / "scenes" / "arm_sleeve.toml"
@@ -271,11 +272,11 @@ _NOT_PHYSICS = ("scene", "output")
 
 
 def _physics(scene_path: Path | str, sets: Sequence[str]) -> dict[str, Any] | None:
-    """The validated scene with overrides, without the sections that only name it or say
-    what to write (None if it does not load)."""
+    """The validated scene with overrides as a dict, without the sections that only name it
+    or say what to write (None if it does not load)."""
     unset, add = scene_edits(Path(scene_path), sets)
     try:
-        data = load_scene(scene_path, [*sets, *add], unset=unset)
+        data = to_dict(load_scene(scene_path, [*sets, *add], unset=unset))
     except (SceneError, OSError):
         return None
     return {k: v for k, v in data.items() if k not in _NOT_PHYSICS}

@@ -52,7 +52,7 @@ def material(table: dict) -> object:
         # the explicit integrator's scene (membrane viscosity is a key of the dynamic ones)
         "solver": {"integrator": "explicit", "duration": 1.0},
     }
-    return build_material(scenes.validate(data)["material"])
+    return build_material(scenes.validate(data).material)
 
 
 def _positive(text: str) -> int:

@@ -61,7 +61,7 @@ def _walk(
     sets = ["initial.don=false", f"initial.positions='{donned}'", f"mesh.n_around={mesh[0]}"]
     sets += [f"contact.self_contact={'true' if selfc else 'false'}"]
     sets += [f"mesh.n_along={mesh[1]}", "output.png=false", "output.checkpoint_every=0"]
-    t_full = scenes.load(SCENE, sets)["solver"]["settle_time"] + 2.2
+    t_full = scenes.load(SCENE, sets).solver.settle_time + 2.2
     sets += [f"solver.settle_time={settle}", f"solver.duration={settle + walk}"]
     scene = scenes.load(SCENE, sets)
     run_scene(scene, out, comm=COMM, overwrite=True)

@@ -30,9 +30,9 @@ args = parser.parse_args()
 
 scene = scenes.load("demos/scenes/arm_sleeve.toml", args.set + ["output.png=false"])
 model, _ = build_model(scene, MPI.COMM_WORLD)
-system = ShellSystem(model, rotary_scale=scene["solver"]["rotary_scale"])
-m = scene["mesh"]
-rank0_print(f"arm sleeve {m['n_around']}x{m['n_along']}, {MPI.COMM_WORLD.size} rank(s)")
+system = ShellSystem(model, rotary_scale=scene.solver.rotary_scale)
+m = scene.mesh
+rank0_print(f"arm sleeve {m.n_around}x{m.n_along}, {MPI.COMM_WORLD.size} rank(s)")
 for rtol in args.rtol:
     times = []
     for _ in range(args.repeat):

@@ -81,11 +81,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"clothfem: {exc}", file=sys.stderr)
         return 2
     if args.command == "validate":
-        problem = scenes.mesh_file_problem(scene) if scene["mesh"]["generator"] == "file" else None
+        problem = scenes.mesh_file_problem(scene) if scene.mesh.generator == "file" else None
         if problem:
             print(f"clothfem: {problem}", file=sys.stderr)
             return 2
-        print(f"{args.scene}: valid scene {scene['scene']['name']!r}")
+        print(f"{args.scene}: valid scene {scene.scene.name!r}")
         return 0
     from .run import RunStopped, run_scene
     from .static import SolverDivergence
@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
 
         logging.basicConfig(format="%(name)s: %(message)s")
         logging.getLogger("clothfem").setLevel(logging.INFO if args.verbose == 1 else logging.DEBUG)
-    out = Path(args.out or Path("results") / scene["scene"]["name"])
+    out = Path(args.out or Path("results") / scene.scene.name)
     try:
         run_scene(scene, out, resume=args.resume, overwrite=args.overwrite)
     except scenes.SceneError as exc:

@@ -58,6 +58,7 @@ from .shell import (
     Symmetry,
 )
 from .simulation import run_dynamic
+from .spec import ElementSpec, MaterialSpec, Scene, SolverSpec
 from .static import LoadStepping, SolverDivergence, solve_static
 from .torque_measure import torque_segment_index
 from .torque_table import FILE as TORQUE_FILE
@@ -188,10 +189,10 @@ def clear_output(out: str | Path, *, comm: MPI.Comm) -> None:
     comm.barrier()
 
 
-def _check_mesh_file(scene: dict[str, Any], comm: MPI.Comm) -> None:
+def _check_mesh_file(scene: Scene, comm: MPI.Comm) -> None:
     """A ``generator = "file"`` mesh must be usable (:func:`clothfem.scene.mesh_file_problem`,
     checked on rank 0, the decision shared)."""
-    if scene["mesh"]["generator"] != "file":
+    if scene.mesh.generator != "file":
         return
     msg = mesh_file_problem(scene) if comm.rank == 0 else None
     msg = comm.bcast(msg, root=0)
@@ -199,30 +200,28 @@ def _check_mesh_file(scene: dict[str, Any], comm: MPI.Comm) -> None:
         raise SceneError(msg)
 
 
-def build_mesh(scene: dict[str, Any], comm: MPI.Comm) -> meshes.SurfaceMesh:
-    m = scene["mesh"]
-    gen, common = m["generator"], dict(cell=m["cell"], order=m["order"])
+def build_mesh(scene: Scene, comm: MPI.Comm) -> meshes.SurfaceMesh:
+    m = scene.mesh
+    gen, common = m.generator, dict(cell=m.cell, order=m.order)
     if gen == "strip":
-        sm = meshes.strip(
-            comm, length=m["length"], width=m["width"], nx=m["nx"], ny=m["ny"], **common
-        )
+        sm = meshes.strip(comm, length=m.length, width=m.width, nx=m.nx, ny=m.ny, **common)
     elif gen == "cylinder":
         sm = meshes.cylinder(
             comm,
-            radius=m["radius"],
-            length=m["length"],
-            n_around=m["n_around"],
-            n_along=m["n_along"],
+            radius=m.radius,
+            length=m.length,
+            n_around=m.n_around,
+            n_along=m.n_along,
             **common,
         )
     elif gen == "panel":
         sm = meshes.cylinder_panel(
             comm,
-            radius=m["radius"],
-            length=m["length"],
-            angle=math.radians(m["angle"]),
-            n_around=m["n_around"],
-            n_along=m["n_along"],
+            radius=m.radius,
+            length=m.length,
+            angle=math.radians(m.angle),
+            n_around=m.n_around,
+            n_along=m.n_along,
             **common,
         )
     elif gen == "pants":
@@ -233,116 +232,116 @@ def build_mesh(scene: dict[str, Any], comm: MPI.Comm) -> meshes.SurfaceMesh:
         try:
             sm = pants(
                 comm,
-                n_around=m["n_around"],
-                n_along=m["n_along"],
-                **{k: m[k] for k in dims if m[k] is not None},
+                n_around=m.n_around,
+                n_along=m.n_along,
+                **{k: getattr(m, k) for k in dims if getattr(m, k) is not None},
                 **common,
             )
         except ValueError as exc:
             raise SceneError(f"scene key 'mesh': {exc}") from None
     else:
         try:
-            sm = meshes.load_msh(m["file"], comm)
+            sm = meshes.load_msh(m.file, comm)
         except ValueError as exc:
             raise SceneError(f"scene key 'mesh.file': {exc}") from None
-    if m["translate"] is not None:
-        sm.mesh.geometry.x[:] += np.asarray(m["translate"])
+    if m.translate is not None:
+        sm.mesh.geometry.x[:] += np.asarray(m.translate)
     return sm
 
 
-def _supports(scene):
+def _supports(scene: Scene) -> list:
     out = []
-    for s in scene["supports"]:
-        kind = s["type"]
+    for s in scene.supports:
+        kind = s.type
         if kind == "clamp":
-            out.append(Clamp(s["where"]))
+            out.append(Clamp(s.where))
         elif kind == "pin":
-            out.append(Pin(s["where"]))
+            out.append(Pin(s.where))
         elif kind == "symmetry":
-            out.append(Symmetry(s["where"], s["axis"]))
+            out.append(Symmetry(s.where, s.axis))
         else:
-            comps = tuple(int(c) for c in s["components"])
+            comps = tuple(int(c) for c in s.components)
             out.append(
                 Prescribed(
-                    s["where"],
-                    displacement=s["displacement"],
+                    s.where,
+                    displacement=s.displacement,
                     components=comps,
-                    rotation=s["rotation"],
+                    rotation=s.rotation,
                 )
             )
     return out
 
 
-def _loads(scene):
+def _loads(scene: Scene) -> list:
     out = []
-    for ld in scene["loads"]:
-        kind = ld["type"]
+    for ld in scene.loads:
+        kind = ld.type
         if kind == "gravity":
-            out.append(Gravity(tuple(ld["acceleration"])))
+            out.append(Gravity(ld.acceleration))
         elif kind == "pressure":
-            out.append(Pressure(ld["value"], follower=ld["follower"]))
+            out.append(Pressure(ld.value, follower=ld.follower))
         elif kind == "edge_traction":
-            out.append(EdgeTraction(ld["where"], tuple(ld["traction"])))
+            out.append(EdgeTraction(ld.where, ld.traction))
         elif kind == "edge_moment":
-            out.append(EdgeMoment(ld["where"], tuple(ld["moment"])))
+            out.append(EdgeMoment(ld.where, ld.moment))
         else:
-            out.append(PointForce(tuple(ld["point"]), tuple(ld["force"])))
+            out.append(PointForce(ld.point, ld.force))
     return out
 
 
-def build_material(mat: dict[str, Any]) -> FabricMaterial:
+def build_material(mat: MaterialSpec) -> FabricMaterial:
     """The material of a validated scene's ``[material]`` table."""
-    common = dict(E1=mat["E1"], E2=mat["E2"], G12=mat["G12"], nu12=mat["nu12"], rho=mat["rho"])
-    if mat["friction_stiffness1"] is not None:  # all four (scene validation)
+    common = dict(E1=mat.E1, E2=mat.E2, G12=mat.G12, nu12=mat.nu12, rho=mat.rho)
+    if mat.friction_stiffness1 is not None:  # all four (scene validation)
         common["friction"] = DahlFriction(
-            stiffness1=mat["friction_stiffness1"],
-            stiffness2=mat["friction_stiffness2"],
-            stress1=mat["friction_stress1"],
-            stress2=mat["friction_stress2"],
+            stiffness1=mat.friction_stiffness1,
+            stiffness2=mat.friction_stiffness2,
+            stress1=mat.friction_stress1,
+            stress2=mat.friction_stress2,
         )
-    if mat["viscosity1"] is not None:  # all three (scene validation)
+    if mat.viscosity1 is not None:  # all three (scene validation)
         common["viscosity"] = FabricViscosity(
-            eta1=mat["viscosity1"], eta2=mat["viscosity2"], eta12=mat["viscosity12"]
+            eta1=mat.viscosity1, eta2=mat.viscosity2, eta12=mat.viscosity12
         )
-    if mat["law"] == "decrimping":
-        return DecrimpingFabric(**common, **{k: mat[k] for k in DECRIMPING_KEYS})
+    if mat.law == "decrimping":
+        return DecrimpingFabric(**common, **{k: getattr(mat, k) for k in DECRIMPING_KEYS})
     return FabricMaterial(**common)
 
 
-def _material_line(mat: dict[str, Any]) -> str:
+def _material_line(mat: MaterialSpec) -> str:
     line = (
-        f"E1 {mat['E1']:.4g} Pa, E2 {mat['E2']:.4g} Pa, G12 {mat['G12']:.4g} Pa, "
-        f"nu12 {mat['nu12']:g}, rho {mat['rho']:g} kg/m^3, t {mat['thickness']:g} m"
+        f"E1 {mat.E1:.4g} Pa, E2 {mat.E2:.4g} Pa, G12 {mat.G12:.4g} Pa, "
+        f"nu12 {mat.nu12:g}, rho {mat.rho:g} kg/m^3, t {mat.thickness:g} m"
     )
-    if mat["law"] == "decrimping":
+    if mat.law == "decrimping":
         line = (
-            f"decrimping, crimped {line}; de-crimped E1 {mat['E1_decrimped']:.4g} Pa, "
-            f"E2 {mat['E2_decrimped']:.4g} Pa above yarn strains "
-            f"{mat['transition1'] + mat['width1']:.4g} / {mat['transition2'] + mat['width2']:.4g}"
+            f"decrimping, crimped {line}; de-crimped E1 {mat.E1_decrimped:.4g} Pa, "
+            f"E2 {mat.E2_decrimped:.4g} Pa above yarn strains "
+            f"{mat.transition1 + mat.width1:.4g} / {mat.transition2 + mat.width2:.4g}"
             " (the explicit stable step shrinks as the yarns de-crimp: solver.recheck_every)"
         )
-    if mat["viscosity1"] is not None:
+    if mat.viscosity1 is not None:
         line += (
-            f"; membrane viscosity {mat['viscosity1']:.4g} / {mat['viscosity2']:.4g} / "
-            f"{mat['viscosity12']:.4g} Pa s"
+            f"; membrane viscosity {mat.viscosity1:.4g} / {mat.viscosity2:.4g} / "
+            f"{mat.viscosity12:.4g} Pa s"
         )
-    if mat["friction_stiffness1"] is not None:
+    if mat.friction_stiffness1 is not None:
         line += (
-            f"; yarn friction (Dahl) k {mat['friction_stiffness1']:.4g} / "
-            f"{mat['friction_stiffness2']:.4g} Pa, S {mat['friction_stress1']:.4g} / "
-            f"{mat['friction_stress2']:.4g} Pa"
+            f"; yarn friction (Dahl) k {mat.friction_stiffness1:.4g} / "
+            f"{mat.friction_stiffness2:.4g} Pa, S {mat.friction_stress1:.4g} / "
+            f"{mat.friction_stress2:.4g} Pa"
         )
     return line
 
 
 def _initial_state(
-    scene: dict[str, Any], model: ShellModel, start: tuple[np.ndarray, np.ndarray, str] | None
+    scene: Scene, model: ShellModel, start: tuple[np.ndarray, np.ndarray, str] | None
 ) -> str:
     """Start ``model`` from ``start`` (X, x, what) or ``initial.positions`` (collective); the
     log line."""
     from .initial_state import displacement_at_nodes, read_positions
 
-    path = scene["initial"]["positions"]
+    path = scene.initial.positions
     if start is None and path is None:
         return "initial state: the mesh at rest"
     X, x, what = start if start is not None else (*read_positions(Path(path)), Path(path).name)
@@ -362,7 +361,7 @@ def _initial_state(
 
 
 def build_model(
-    scene: dict[str, Any],
+    scene: Scene,
     comm: MPI.Comm = MPI.COMM_WORLD,
     *,
     start: tuple[np.ndarray, np.ndarray, str] | None = None,
@@ -371,84 +370,83 @@ def build_model(
     (X, x, what) node positions to start from instead of ``initial.positions`` (the
     donning's)."""
     sm = build_mesh(scene, comm)
-    mat = scene["material"]
+    mat = scene.material
     material = build_material(mat)
     model = ShellModel(
         sm,
         material=material,
-        thickness=mat["thickness"],
+        thickness=mat.thickness,
         loads=_loads(scene),
         supports=_supports(scene),
-        warp=mat["warp"],
-        degree=scene["element"]["degree"],
+        warp=mat.warp,
+        degree=scene.element.degree,
         quadrature=Quadrature(
-            reduced=scene["element"]["reduced_quadrature"],
-            scheme=scene["element"]["scheme"],
-            psri_factor=scene["element"]["psri_factor"],
-            stabilization=scene["element"]["stabilization"],
+            reduced=scene.element.reduced_quadrature,
+            scheme=scene.element.scheme,
+            psri_factor=scene.element.psri_factor,
+            stabilization=scene.element.stabilization,
         ),
     )
     n_nodes = comm.allreduce(model.n_owned, op=MPI.SUM)
     n_cells = comm.allreduce(sm.mesh.topology.index_map(2).size_local, op=MPI.SUM)
     started = _initial_state(scene, model, start)
     log = [
-        f"mesh: {scene['mesh']['generator']}, {n_cells} {scene['mesh']['cell']} cells "
-        f"(order {scene['mesh']['order']}, u and theta of degree {scene['element']['degree']}), "
+        f"mesh: {scene.mesh.generator}, {n_cells} {scene.mesh.cell} cells "
+        f"(order {scene.mesh.order}, u and theta of degree {scene.element.degree}), "
         f"{n_nodes} nodes, {5 * n_nodes} unknowns (u: 3, theta: 2 per node), {comm.size} rank(s)",
         f"material: {_material_line(mat)}",
-        f"element: {_element_line(scene['element'])}",
-        "supports: "
-        + (", ".join(f"{s['type']} on {s['where']}" for s in scene["supports"]) or "none"),
-        "loads: " + (", ".join(ld["type"] for ld in scene["loads"]) or "none"),
+        f"element: {_element_line(scene.element)}",
+        "supports: " + (", ".join(f"{s.type} on {s.where}" for s in scene.supports) or "none"),
+        "loads: " + (", ".join(ld.type for ld in scene.loads) or "none"),
         started,
-        _inertia_log(scene["solver"]),
+        _inertia_log(scene.solver),
         (
             "linear solves: none (explicit: lumped mass)"
-            if scene["solver"]["integrator"] == "explicit"
+            if scene.solver.integrator == "explicit"
             else f"linear solves: {describe_direct_lu(comm)}"
         ),
     ]
-    if scene["body"]:
+    if scene.body:
         log += contact_log(scene)
     else:
         log += ["contact: not built (no body in the scene)", "friction: not built (no contact)"]
     return model, log
 
 
-def _element_line(el: dict[str, Any]) -> str:
+def _element_line(el: ElementSpec) -> str:
     """How the scene's membrane and shear are integrated, for the build log."""
-    if el["scheme"] == "mitc9":
+    if el.scheme == "mitc9":
         return "MITC9 (assumed membrane and shear strains, 3 x 3 points; docs/shell_element.md)"
-    if el["scheme"] == "psri":
+    if el.scheme == "psri":
         return (
-            f"partial selective reduced integration (alpha = min(1, {el['psri_factor']:g} "
+            f"partial selective reduced integration (alpha = min(1, {el.psri_factor:g} "
             "t^2/h^2) of membrane and shear fully integrated; docs/shell_element.md)"
         )
-    return f"selective reduced integration (stabilization {el['stabilization']:g}; for comparison)"
+    return f"selective reduced integration (stabilization {el.stabilization:g}; for comparison)"
 
 
-def _inertia_log(sv: dict[str, Any]) -> str:
-    if sv["integrator"] == "static":
+def _inertia_log(sv: SolverSpec) -> str:
+    if sv.integrator == "static":
         return "inertia: not built (static integrator)"
-    if sv["integrator"] == "explicit":
+    if sv.integrator == "explicit":
         return (
-            f"inertia: lumped mass, central difference, dt = {sv['safety']:g} x dt_crit"
+            f"inertia: lumped mass, central difference, dt = {sv.safety:g} x dt_crit"
             + (
-                f" (re-estimated every {sv['recheck_every']} steps)"
-                if sv["recheck_every"]
+                f" (re-estimated every {sv.recheck_every} steps)"
+                if sv.recheck_every
                 else " (at t = 0)"
             )
-            + f", rotary inertia x {sv['rotary_scale']:g}"
+            + f", rotary inertia x {sv.rotary_scale:g}"
             + (
-                f", mass damping {sv['settle_damping']:g} 1/s until {sv['settle_time']:g} s "
+                f", mass damping {sv.settle_damping:g} 1/s until {sv.settle_time:g} s "
                 "(settling only)"
-                if sv["settle_damping"] > 0
+                if sv.settle_damping > 0
                 else ""
             )
         )
     return (
-        f"inertia: consistent mass, Newmark gamma {sv['gamma']:g}, dt {sv['dt']:g} s, "
-        f"rotary inertia x {sv['rotary_scale']:g}"
+        f"inertia: consistent mass, Newmark gamma {sv.gamma:g}, dt {sv.dt:g} s, "
+        f"rotary inertia x {sv.rotary_scale:g}"
     )
 
 
@@ -464,7 +462,7 @@ class _Donned:
     write: Callable[[], None]
 
 
-def _don(scene: dict[str, Any], out: Path, comm: MPI.Comm, *, resume: bool) -> _Donned:
+def _don(scene: Scene, out: Path, comm: MPI.Comm, *, resume: bool) -> _Donned:
     """The donning of ``initial.don`` (rank 0 computes, every rank gets the positions); a
     resumed run reads the donned.npz it wrote."""
     from .initial_state import read_positions
@@ -498,7 +496,7 @@ def _don(scene: dict[str, Any], out: Path, comm: MPI.Comm, *, resume: bool) -> _
 
     def write() -> None:
         if comm.rank == 0:
-            donning.write_donned(out, d, summ, {"scene": scene["scene"]["name"]})
+            donning.write_donned(out, d, summ, {"scene": scene.scene.name})
         comm.barrier()
 
     return _Donned((X, x, "the donning"), summ, write)
@@ -517,13 +515,13 @@ def _started(out: Path, comm: MPI.Comm) -> bool:
     return bool(comm.bcast(ok if comm.rank == 0 else None, root=0))
 
 
-def _measures(scene: dict[str, Any], out: Path) -> dict[str, Any] | None:
+def _measures(scene: Scene, out: Path) -> dict[str, Any] | None:
     """The resistance measures of a body scene's history (:func:`report.resistance_measures`),
     keyed by the measured joint (the torque segment); None without a readable history."""
     from .report import ReportError, read_history, resistance_measures
 
     k = torque_segment_index(scene)
-    joint = scene["body"][k]["name"] if k is not None else "joint"
+    joint = scene.body[k].name if k is not None else "joint"
     try:
         h = read_history(out / "history.csv")
     except ReportError:
@@ -532,7 +530,7 @@ def _measures(scene: dict[str, Any], out: Path) -> dict[str, Any] | None:
 
 
 def run_scene(
-    scene: dict[str, Any],
+    scene: Scene,
     out: str | Path,
     *,
     comm: MPI.Comm = MPI.COMM_WORLD,
@@ -548,12 +546,12 @@ def run_scene(
     ``out/summary.json`` says at the end whether the run completed (and why not).
     """
     out = Path(out)
-    if scene["solver"]["integrator"] != "static" and scene["material"]["rho"] <= 0:
+    if scene.solver.integrator != "static" and scene.material.rho <= 0:
         raise SceneError(
-            f"scene key 'material.rho': the {scene['solver']['integrator']} integrator needs a "
+            f"scene key 'material.rho': the {scene.solver.integrator} integrator needs a "
             "density > 0 kg/m^3"
         )
-    if resume and scene["solver"]["integrator"] == "static":
+    if resume and scene.solver.integrator == "static":
         raise SceneError(
             "--resume needs solver.integrator = 'newmark' or 'explicit' (static runs write no "
             "checkpoints)"
@@ -561,21 +559,21 @@ def run_scene(
     check_output(out, overwrite=overwrite, resume=resume, comm=comm)
     _check_mesh_file(scene, comm)
     t0 = time.perf_counter()
-    donned = _don(scene, out, comm, resume=resume) if scene["initial"]["don"] else None
+    donned = _don(scene, out, comm, resume=resume) if scene.initial.don else None
     model, log = build_model(scene, comm, start=donned.start if donned else None)
     if overwrite:
         clear_output(out, comm=comm)
     if donned is not None:
         donned.write()
-    rank0_print(f"scene {scene['scene']['name']!r}")
+    rank0_print(f"scene {scene.scene.name!r}")
     for line in log:
         rank0_print("  built " + line if "not built" not in line else "  " + line)
-    s = scene["solver"]
-    inc = 1.0 / s["steps"]
+    s = scene.solver
+    inc = 1.0 / s.steps
     stepping = LoadStepping(
         initial_increment=inc,
-        max_increment=max(inc, s["max_increment"]),
-        min_increment=min(inc, s["min_increment"]),
+        max_increment=max(inc, s.max_increment),
+        min_increment=min(inc, s.min_increment),
     )
     stop = {"signal": None}
 
@@ -583,18 +581,18 @@ def run_scene(
         stop["signal"] = signum
 
     old = signal.signal(signal.SIGTERM, handler)
-    if scene["body"] or s["integrator"] != "static":
+    if scene.body or s.integrator != "static":
 
         def check_stop(where: str) -> None:
             if comm.allreduce(stop["signal"] is not None, op=MPI.LOR):
                 raise RunStopped(f"stopped by signal after {where}; results kept in {out}")
 
-        summary: dict[str, Any] = {"scene": scene["scene"]["name"], "completed": False}
+        summary: dict[str, Any] = {"scene": scene.scene.name, "completed": False}
         summary["built"] = log  # what the run built and left out (e.g. a repeated gait cycle)
         if donned is not None:
             summary["donning"] = donned.summary
         try:
-            if s["integrator"] == "static":
+            if s.integrator == "static":
                 run_contact_scene(
                     scene, out, model=model, comm=comm, t0=t0, check_stop=check_stop,
                     summary=summary,
@@ -611,16 +609,16 @@ def run_scene(
         finally:
             signal.signal(signal.SIGTERM, old)
             summary["wall_time"] = time.perf_counter() - t0
-            if comm.rank == 0 and scene["body"]:
+            if comm.rank == 0 and scene.body:
                 summary["measures"] = _measures(scene, out)
-            if comm.rank == 0 and scene["torques"]:
-                t_from = scene["solver"]["settle_time"]
+            if comm.rank == 0 and scene.torques:
+                t_from = scene.solver.settle_time
                 summary["torques"] = torque_stats(out / TORQUE_FILE, t_from=t_from)
             if _started(out, comm):  # a failed start writes nothing
                 _write_summary(out, summary, comm)
         rank0_print(f"done in {time.perf_counter() - t0:.1f} s; results in {out}/")
         return out
-    progress = Progress(label=scene["scene"]["name"], comm=comm)
+    progress = Progress(label=scene.scene.name, comm=comm)
     clock = {"row": time.perf_counter()}
     try:
         with ResultWriter(out, model) as writer:
@@ -656,7 +654,7 @@ def run_scene(
     finally:
         progress.close()
         signal.signal(signal.SIGTERM, old)
-    if scene["output"]["png"]:
-        snapshot_png(model, out / "final.png", title=scene["scene"]["name"])
+    if scene.output.png:
+        snapshot_png(model, out / "final.png", title=scene.scene.name)
     rank0_print(f"done in {time.perf_counter() - t0:.1f} s; results in {out}/")
     return out

@@ -22,6 +22,7 @@ from .report import mark_events
 from .scene import SceneError
 from .scene_body import RunPlan
 from .shell import ShellModel
+from .spec import Scene
 from .static import SolverDivergence
 
 __all__ = [
@@ -106,17 +107,17 @@ def plot_torque_angle(
     plt.close(fig)
 
 
-def write_animation(scene: dict[str, Any], out: Path, bodies_at: Callable[[float], list]) -> None:
+def write_animation(scene: Scene, out: Path, bodies_at: Callable[[float], list]) -> None:
     """``out/animation.gif`` from the field series (rank 0; scenes with PNG output)."""
-    if not scene["output"]["png"] or not (out / "fabric.h5").exists():
+    if not scene.output.png or not (out / "fabric.h5").exists():
         return
     animate_series(
         out / "fabric.h5",
         out / "animation.gif",
         bodies_at=lambda t: ellipsoid_meshes(bodies_at(t)),
-        title=scene["scene"]["name"],
+        title=scene.scene.name,
         view="xz",
-        max_frames=scene["output"]["frames"],
+        max_frames=scene.output.frames,
     )
 
 
@@ -184,7 +185,7 @@ def load_checkpoint(out: Path, comm: MPI.Comm) -> dict[str, np.ndarray]:
 
 
 def write_snapshot(
-    scene: dict[str, Any],
+    scene: Scene,
     model: ShellModel,
     out: Path,
     comm: MPI.Comm,
@@ -195,11 +196,11 @@ def write_snapshot(
 ) -> None:
     """``out/snapshot_<tag>.png`` of the fabric, coloured by the contact ``pressure`` (else
     by |u|), with the ellipsoids ``bodies`` opaque (if PNGs)."""
-    if scene["output"]["png"]:
+    if scene.output.png:
         snapshot_png(
             model,
             out / f"snapshot_{tag}.png",
-            title=f"{scene['scene']['name']} {tag}",
+            title=f"{scene.scene.name} {tag}",
             extra_meshes=ellipsoid_meshes(bodies) if comm.rank == 0 and bodies else (),
             view="xz",
             pressure=pressure,

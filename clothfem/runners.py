@@ -67,6 +67,7 @@ from .scene_body import (
     write_events,
 )
 from .shell import ShellModel
+from .spec import Scene
 from .static import SolverDivergence
 from .torque_measure import torque_segment_index
 
@@ -175,7 +176,7 @@ def _segment_torque(contact, model: ShellModel, k: int, joint: np.ndarray, comm)
 
 
 def run_contact_scene(
-    scene: dict[str, Any],
+    scene: Scene,
     out: Path,
     *,
     model: ShellModel,
@@ -195,32 +196,32 @@ def run_contact_scene(
     """
     summary = summary if summary is not None else {}
     write_events(scene, out, comm, summary)
-    c = scene["contact"]
+    c = scene.contact
     motions = body_motions(scene)
     bodies = []
-    for seg, mo in zip(scene["body"], motions, strict=True):
+    for seg, mo in zip(scene.body, motions, strict=True):
         pose = mo.pose(0.0)
-        bodies.append((pose.centre, pose.rotation, np.asarray(seg["radii"], dtype=float)))
+        bodies.append((pose.centre, pose.rotation, np.asarray(seg.radii, dtype=float)))
     # quasi-static wrinkling paths have several equilibria: the paper's fixed-set passes
     # (no semismooth set changes inside Newton) keep the branch independent of round-off
-    params = LagrangeContactParameters(mu=c["mu"], semismooth_passes=0)
+    params = LagrangeContactParameters(mu=c.mu, semismooth_passes=0)
     contact = LagrangeContact(model, bodies, params=params)
     stab = None
-    if c["stabilization"] > 0:
-        stab = _ViscousStabilization(model, contact.lumped_area(), c["stabilization"])
+    if c.stabilization > 0:
+        stab = _ViscousStabilization(model, contact.lumped_area(), c.stabilization)
     J = torque_centre(scene)
     k_torque = torque_segment_index(scene)
     hinge_axis = (
         np.asarray(motions[k_torque].axis) if k_torque is not None else np.array([0.0, 0.0, 0.0])
     )
     aj = aj_mask(scene, J)
-    png = scene["output"]["png"]
-    every = scene["output"]["every"]
-    name = scene["scene"]["name"]
+    png = scene.output.png
+    every = scene.output.every
+    name = scene.scene.name
     thickness = model.thickness
 
     def torque() -> np.ndarray:
-        if c["aj"] != "touching":
+        if c.aj != "touching":
             return contact.torque(J, nodes=aj)
         return _segment_torque(contact, model, k_torque, J, comm)
 
@@ -250,7 +251,7 @@ def run_contact_scene(
         update_pressure()
         write_snapshot(scene, model, out, comm, tag, contact.bodies, pressure=pressure)
 
-    increments = c["increments"]
+    increments = c.increments
     hinge_ids = [i for i, m in enumerate(motions) if isinstance(m, HingeMotion)]
     t_end = max((motions[i].t_end for i in hinge_ids), default=0.0)
     stage_wall = {"t": time.perf_counter()}
@@ -262,7 +263,7 @@ def run_contact_scene(
             stab.commit()
         check_stop(f"a sub-step at load factor {rec.load_factor:g}")
 
-    progress = Progress(label=scene["scene"]["name"], comm=comm)
+    progress = Progress(label=scene.scene.name, comm=comm)
     with ResultWriter(out, model) as writer:
 
         def write_row(stage: str, inc: int, t: float, recs) -> None:
@@ -311,7 +312,7 @@ def run_contact_scene(
                 writer.write(t, row, (pressure,))
             else:
                 writer.append_row(row)
-            n_settle = scene["solver"]["steps"] if c["settle"] else 1
+            n_settle = scene.solver.steps if c.settle else 1
             done = inc / n_settle if stage == "settle" else 1.0 + inc / max(increments, 1)
             progress.update(
                 done / (2.0 if hinge_ids else 1.0),
@@ -324,8 +325,8 @@ def run_contact_scene(
             check_stop(f"{stage} increment {inc}")
 
         try:
-            if c["settle"]:
-                steps = scene["solver"]["steps"]
+            if c.settle:
+                steps = scene.solver.steps
                 for s in range(1, steps + 1):
                     try:
                         recs = contact.advance(s / steps, on_step=on_sub)

@@ -4,13 +4,17 @@ A scene fully describes a run: fabric mesh, material and thickness, supports and
 body and its motion, contact, the integrator and the outputs. The schema below is the single
 source of truth: :func:`validate` checks a parsed file against it (unknown keys rejected,
 keys of another integrator than the scene's refused, one-line errors naming the key and
-the allowed values) and fills defaults, and
-:func:`schema_markdown` renders it as the reference table of ``docs/scene.md``.
+the allowed values), fills defaults and returns the typed, frozen
+:class:`clothfem.spec.Scene`, and :func:`schema_markdown` renders the schema as the reference
+table of ``docs/scene.md``. The checks run on the parsed tables (dicts); the typed scene is
+built once they pass, and code that needs another scene builds one from it with
+:func:`dataclasses.replace` (as :func:`torque_entry`) or validates an edited file again.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import re
 import tomllib
@@ -20,6 +24,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .spec import Scene, SegmentSpec, TorqueSpec, scene_from_dict, section_from_dict
 
 __all__ = [
     "SceneError",
@@ -962,8 +968,9 @@ def _validate_table(path: str, section: Section, table: Any) -> dict[str, Any]:
     return out
 
 
-def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[str, Any]:
-    """Validate a parsed scene and fill defaults; raises :class:`SceneError` (one line).
+def validate(data: dict[str, Any], *, base: str | Path | None = None) -> Scene:
+    """Validate a parsed scene, fill defaults and return the typed :class:`Scene`; raises
+    :class:`SceneError` (one line).
     ``base``: the scene file's folder (relative motion-capture paths are also looked up
     there)."""
     unknown = sorted(set(data) - set(SCHEMA))
@@ -1027,12 +1034,13 @@ def validate(data: dict[str, Any], *, base: str | Path | None = None) -> dict[st
     _validate_duration(out)
     _validate_torques(out)
     _validate_size(out)
+    scene = scene_from_dict(out)
     if m["generator"] != "file":
-        check_boundaries(out, GENERATOR_BOUNDARIES[m["generator"]], m["generator"])
-    sv = out["solver"]
-    if sv["integrator"] == "newmark" and sv["dt_min"] is not None and sv["dt_min"] > sv["dt"]:
-        _fail("solver.dt_min", f"must be <= solver.dt = {sv['dt']:g} s, got {sv['dt_min']!r}")
-    return out
+        check_boundaries(scene, GENERATOR_BOUNDARIES[m["generator"]], m["generator"])
+    sv = scene.solver
+    if sv.integrator == "newmark" and sv.dt_min is not None and sv.dt_min > sv.dt:
+        _fail("solver.dt_min", f"must be <= solver.dt = {sv.dt:g} s, got {sv.dt_min!r}")
+    return scene
 
 
 def _foreign(data: dict[str, Any]) -> list[tuple[str, When, Any]]:
@@ -1132,8 +1140,8 @@ def _validate_initial(out: dict[str, Any], *, base: Path | None) -> None:
 
 
 def _validate_don(data: dict[str, Any], out: dict[str, Any]) -> None:
-    """``initial.don`` (:func:`clothfem.particle.scene_donning.check_scene`, which fills the
-    pants dimensions from the donning fit); a [donning] table needs it."""
+    """``initial.don`` (:func:`clothfem.particle.scene_donning.check_scene`); the pants
+    dimensions the scene leaves out are the donning fit's; a [donning] table needs it."""
     if not out["initial"]["don"]:
         if "donning" in data:
             _fail("donning", "applies with initial.don = true only")
@@ -1141,7 +1149,7 @@ def _validate_don(data: dict[str, Any], out: dict[str, Any]) -> None:
     from .particle.scene_donning import check_scene
 
     try:
-        check_scene(out)
+        out["mesh"].update(check_scene(scene_from_dict(out)))
     except ValueError as exc:
         key, _, msg = str(exc).partition(": ")
         _fail(key, msg)
@@ -1217,7 +1225,7 @@ def _validate_mocap(out: dict[str, Any], *, base: Path | None) -> None:
                 _fail(f"{key}.{k}", str(exc))
         if seg["repeat"] > 1:
             try:
-                repeated_markers(seg, markers)
+                repeated_markers(section_from_dict(seg, section="body"), markers)
             except ValueError as exc:
                 _fail(f"{key}.repeat", str(exc))
         placed = seg["placed_by"] or seg["name"]
@@ -1258,7 +1266,7 @@ def _validate_keyframes(seg: dict[str, Any], key: str, integrator: str) -> None:
     from .scene_body import keyframe_motion
 
     try:
-        keyframe_motion(seg)
+        keyframe_motion(section_from_dict(seg, section="body"))
     except ValueError as exc:
         _fail(f"{key}.turns", str(exc))
 
@@ -1271,19 +1279,19 @@ def _validate_repeat(seg: dict[str, Any], key: str) -> None:
         _fail(f"{key}.stride_markers", "is a key of repeat > 1 only")
 
 
-def repeated_markers(seg: dict[str, Any], markers):
+def repeated_markers(seg: SegmentSpec, markers):
     """:class:`clothfem.body.gait_repeat.RepeatedGait` of a validated mocap segment with
     ``repeat > 1``: its window of ``markers`` played ``repeat`` times (times from 0)."""
     from .body.gait_repeat import repeat_cycle
 
-    start, end = seg["window"]
+    start, end = seg.window
     return repeat_cycle(
         markers,
         start=start,
         end=end,
-        copies=seg["repeat"],
-        blend=seg["repeat_blend"],
-        pelvis_markers=tuple(seg["stride_markers"]),
+        copies=seg.repeat,
+        blend=seg.repeat_blend,
+        pelvis_markers=seg.stride_markers,
     )
 
 
@@ -1379,11 +1387,11 @@ GENERATOR_BOUNDARIES = {
 }
 
 
-def check_boundaries(scene: dict[str, Any], names: Sequence[str], source: str) -> None:
+def check_boundaries(scene: Scene, names: Sequence[str], source: str) -> None:
     """Every boundary a validated ``scene`` names (supports, edge loads) is one of ``names``,
     the boundaries of the mesh ``source`` (a generator or a file name)."""
-    refs = [(f"supports[{i}].where", s["where"]) for i, s in enumerate(scene["supports"])]
-    refs += [(f"loads[{i}].where", ld["where"]) for i, ld in enumerate(scene["loads"])]
+    refs = [(f"supports[{i}].where", s.where) for i, s in enumerate(scene.supports)]
+    refs += [(f"loads[{i}].where", ld.where) for i, ld in enumerate(scene.loads)]
     for path, name in refs:
         if name is not None and name not in names:
             _fail(
@@ -1392,12 +1400,12 @@ def check_boundaries(scene: dict[str, Any], names: Sequence[str], source: str) -
             )
 
 
-def mesh_file_problem(scene: dict[str, Any]) -> str | None:
+def mesh_file_problem(scene: Scene) -> str | None:
     """Why a ``generator = "file"`` mesh cannot be used (one line), else None: the file must
     exist, be a gmsh mesh with 2-D elements and no 3-D ones (a surface), of 9-node
     quadrilaterals only for element.scheme = 'mitc9', and have the boundaries the scene
     names as physical groups of its curves (gmsh; serial)."""
-    path = Path(scene["mesh"]["file"])
+    path = Path(scene.mesh.file)
     key = "scene key 'mesh.file'"
     if not path.is_file():
         return f"{key}: {str(path)!r} does not exist"
@@ -1412,9 +1420,7 @@ def mesh_file_problem(scene: dict[str, Any]) -> str | None:
         if not len(gmsh.model.mesh.getElements(2)[0]) or len(gmsh.model.mesh.getElements(3)[0]):
             return f"{key}: {path.name!r} must be a surface mesh (2-D elements, none 3-D)"
         quad9 = 10  # gmsh's element type of the 9-node quadrilateral
-        if scene["element"]["scheme"] == "mitc9" and set(gmsh.model.mesh.getElements(2)[0]) != {
-            quad9
-        }:
+        if scene.element.scheme == "mitc9" and set(gmsh.model.mesh.getElements(2)[0]) != {quad9}:
             return (
                 "scene key 'element.scheme': 'mitc9' needs 9-node quadrilaterals; "
                 f"{path.name!r} has other 2-D elements (use 'psri')"
@@ -1482,6 +1488,10 @@ def _validate_size(out: dict[str, Any]) -> None:
         )
 
 
+#: The Eq. 28 keys a ``[[torques]]`` entry shares with ``[contact]``.
+TORQUE_KEYS = ("torque_point", "torque_with", "aj", "flexion_frame", "flexion_axis")
+
+
 def _validate_torques(out: dict[str, Any]) -> None:
     """The ``[[torques]]`` measures: unique names, dynamic runs with a body, and the Eq. 28
     keys checked as those of ``[contact]`` (:func:`torque_entry`)."""
@@ -1496,15 +1506,16 @@ def _validate_torques(out: dict[str, Any]) -> None:
             _fail(path, "needs a body: add [[body]] segments")
         if out["solver"]["integrator"] == "static":
             _fail(path, "is measured by solver.integrator = 'explicit' or 'newmark', not 'static'")
-        _validate_torque(torque_entry(out, m)["contact"], out["body"], path=path)
+        c = {**out["contact"], "torque_segment": m["segment"], **{k: m[k] for k in TORQUE_KEYS}}
+        _validate_torque(c, out["body"], path=path)
 
 
-def torque_entry(scene: dict[str, Any], entry: dict[str, Any]) -> dict[str, Any]:
+def torque_entry(scene: Scene, entry: TorqueSpec) -> Scene:
     """``scene`` with the Eq. 28 keys of its ``[contact]`` replaced by those of the
     ``[[torques]]`` ``entry`` (``segment`` is ``torque_segment``)."""
-    keys = ("torque_point", "torque_with", "aj", "flexion_frame", "flexion_axis")
-    c = {**scene["contact"], "torque_segment": entry["segment"], **{k: entry[k] for k in keys}}
-    return {**scene, "contact": c}
+    keys = {k: getattr(entry, k) for k in TORQUE_KEYS}
+    contact = dataclasses.replace(scene.contact, torque_segment=entry.segment, **keys)
+    return dataclasses.replace(scene, contact=contact)
 
 
 def _validate_torque(c: dict[str, Any], body: list[dict[str, Any]], *, path="contact") -> None:
@@ -1594,7 +1605,7 @@ def remove_keys(data: dict[str, Any], paths: list[str]) -> dict[str, Any]:
 
 def load(
     path: str | Path, overrides: list[str] | None = None, *, unset: list[str] | None = None
-) -> dict[str, Any]:
+) -> Scene:
     """Read a scene file, remove the keys ``unset`` (:func:`remove_keys`), apply the
     ``overrides`` (:func:`apply_overrides`) and validate it."""
     path = Path(path)

@@ -18,6 +18,7 @@ from mpi4py import MPI
 
 from .body import FixedMotion, HingeMotion, MarkerSet, Pose, segment_frames
 from .body.motion import InterpolatedMotion
+from .spec import Scene, SegmentSpec
 from .torque_measure import TorqueMeasure, torque_measure, torque_segment_index
 
 __all__ = [
@@ -85,7 +86,7 @@ class PlayedMotion:
         return self.motion.pose(max(t, 0.0))
 
 
-def _window(markers: MarkerSet, window: list[float]) -> MarkerSet:
+def _window(markers: MarkerSet, window: tuple[float, ...]) -> MarkerSet:
     """The rows of ``markers`` within ``window`` [s] (validated by the scene)."""
     t = markers.times
     tol = 1e-9 * max(1.0, abs(float(t[-1])))
@@ -94,40 +95,40 @@ def _window(markers: MarkerSet, window: list[float]) -> MarkerSet:
     return markers.window(first=first, last=last)
 
 
-def _mocap_motions(scene: dict[str, Any]) -> dict[int, PlayedMotion]:
+def _mocap_motions(scene: Scene) -> dict[int, PlayedMotion]:
     """The motions of the ``type = "mocap"`` segments: each recording's window, moved by the
     rigid transform that puts the placing segment's Eq. 27 pose at the window start at its
     ``centre`` with axes (``axis``, ``up``) (none with ``placement = 'recording'``), played
     from t = 0; the ellipsoid centres moved by ``offset`` in the segment frame."""
     from .scene import _read_motion, repeated_markers
 
-    segs = scene["body"]
-    by_name = {seg["name"]: seg for seg in segs}
+    segs = scene.body
+    by_name = {seg.name: seg for seg in segs}
     files: dict[str, MarkerSet] = {}
 
-    def part(seg) -> MarkerSet:
-        if seg["file"] not in files:
-            files[seg["file"]] = _read_motion(Path(seg["file"]))
-        if seg["repeat"] > 1:  # the window as a gait cycle, repeated (times from 0)
-            return repeated_markers(seg, files[seg["file"]]).markers
-        return _window(files[seg["file"]], seg["window"])
+    def part(seg: SegmentSpec) -> MarkerSet:
+        if seg.file not in files:
+            files[seg.file] = _read_motion(Path(seg.file))
+        if seg.repeat > 1:  # the window as a gait cycle, repeated (times from 0)
+            return repeated_markers(seg, files[seg.file]).markers
+        return _window(files[seg.file], seg.window)
 
-    def refs(seg) -> dict[str, Any]:
-        return {k: seg[k] for k in ("j1", "j2", "m")}
+    def refs(seg: SegmentSpec) -> dict[str, Any]:
+        return {"j1": seg.j1, "j2": seg.j2, "m": seg.m}
 
     out: dict[int, PlayedMotion] = {}
     for i, seg in enumerate(segs):
-        if seg["type"] != "mocap":
+        if seg.type != "mocap":
             continue
-        placing = by_name[seg["placed_by"]]
+        placing = by_name[seg.placed_by]
         ref = segment_frames(
-            part(placing), marker_map={placing["name"]: refs(placing)}, max_gap=placing["max_gap"]
-        )[placing["name"]]
+            part(placing), marker_map={placing.name: refs(placing)}, max_gap=placing.max_gap
+        )[placing.name]
         c0, q0 = ref.centres[0], ref.rotations[0]
         rot, shift = np.eye(3), np.zeros(3)  # placement = 'recording'
-        if placing["placement"] == "centre":
-            rot = _frame(placing["axis"], placing["up"]) @ q0.T
-            shift = np.asarray(placing["centre"]) - rot @ c0
+        if placing.placement == "centre":
+            rot = _frame(placing.axis, placing.up) @ q0.T
+            shift = np.asarray(placing.centre) - rot @ c0
         own = part(seg)
         moved = MarkerSet(
             times=own.times - own.times[0],
@@ -136,68 +137,67 @@ def _mocap_motions(scene: dict[str, Any]) -> dict[int, PlayedMotion]:
             source=own.source,
             first_frame=own.first_frame,
         )
-        fr = segment_frames(moved, marker_map={seg["name"]: refs(seg)}, max_gap=seg["max_gap"])
-        fr = fr[seg["name"]]
-        offset = np.asarray(seg["offset"] or (0.0, 0.0, 0.0), dtype=float)
+        fr = segment_frames(moved, marker_map={seg.name: refs(seg)}, max_gap=seg.max_gap)
+        fr = fr[seg.name]
+        offset = np.asarray(seg.offset or (0.0, 0.0, 0.0), dtype=float)
         motion = InterpolatedMotion(  # Eq. 27 centroids moved by the offset in the frame
             times=fr.times,
             centres=fr.centres + fr.rotations @ offset,
             rotations=fr.rotations,
-            name=seg["name"],
+            name=seg.name,
         )
         joint = -offset - [0.5 * float(np.mean(np.linalg.norm(fr.j2 - fr.j1, axis=1))), 0, 0]
         out[i] = PlayedMotion(motion=motion, t_end=float(motion.times[-1]), joint_local=joint)
     return out
 
 
-def keyframe_motion(seg: dict[str, Any]) -> PlayedMotion:
+def keyframe_motion(seg: SegmentSpec) -> PlayedMotion:
     """The motion of a ``type = "keyframes"`` segment: its centres and turned axes at the key
     times, interpolated (:class:`InterpolatedMotion`), played from t = 0 and resting at the
     last key (ValueError if two keys turn more than 90 deg apart)."""
     from scipy.spatial.transform import Rotation
 
-    times = np.asarray(seg["times"], dtype=float)
-    turns = seg["turns"] if seg["turns"] is not None else np.zeros((times.size, 3))
+    times = np.asarray(seg.times, dtype=float)
+    turns = seg.turns if seg.turns is not None else np.zeros((times.size, 3))
     motion = InterpolatedMotion(
         times=times,
-        centres=np.asarray(seg["centres"], dtype=float),
-        rotations=Rotation.from_rotvec(np.asarray(turns)).as_matrix()
-        @ _frame(seg["axis"], seg["up"]),
-        name=seg["name"],
+        centres=np.asarray(seg.centres, dtype=float),
+        rotations=Rotation.from_rotvec(np.asarray(turns)).as_matrix() @ _frame(seg.axis, seg.up),
+        name=seg.name,
     )
     return PlayedMotion(motion=motion, t_end=float(times[-1]), joint_local=np.zeros(3))
 
 
-def body_motions(scene: dict[str, Any]) -> list[FixedMotion | HingeMotion | PlayedMotion]:
+def body_motions(scene: Scene) -> list[FixedMotion | HingeMotion | PlayedMotion]:
     """One motion per ``[[body]]`` segment (order kept), time in s."""
     out: list[FixedMotion | HingeMotion | PlayedMotion] = []
     mocap = _mocap_motions(scene)
-    for i, seg in enumerate(scene["body"]):
-        if seg["type"] == "mocap":
+    for i, seg in enumerate(scene.body):
+        if seg.type == "mocap":
             out.append(mocap[i])
             continue
-        if seg["type"] == "keyframes":
+        if seg.type == "keyframes":
             out.append(keyframe_motion(seg))
             continue
-        q0 = _frame(seg["axis"], seg["up"])
-        if seg["type"] == "fixed":
-            out.append(FixedMotion(centre=seg["centre"], rotation=q0))
+        q0 = _frame(seg.axis, seg.up)
+        if seg.type == "fixed":
+            out.append(FixedMotion(centre=seg.centre, rotation=q0))
         else:
             out.append(
                 HingeMotion(
-                    joint=seg["joint"],
-                    axis=seg["hinge_axis"],
-                    omega=math.radians(seg["omega"]),
-                    angle_max=math.radians(seg["angle_max"]),
-                    centre0=seg["centre"],
+                    joint=seg.joint,
+                    axis=seg.hinge_axis,
+                    omega=math.radians(seg.omega),
+                    angle_max=math.radians(seg.angle_max),
+                    centre0=seg.centre,
                     rotation0=q0,
-                    t_ramp=seg["omega_ramp"],
+                    t_ramp=seg.omega_ramp,
                 )
             )
     return out
 
 
-def recorded_events(scene: dict[str, Any]) -> list[tuple[float, str, str]]:
+def recorded_events(scene: Scene) -> list[tuple[float, str, str]]:
     """The gait events (C3D ``EVENT`` group: foot strikes, foot offs) of the recordings the
     mocap segments play, on the run's clock: ``(solver.settle_time + event time - first
     played frame time + k T, context, label)`` [s], T the cycle of a repeated window (copy k),
@@ -207,20 +207,20 @@ def recorded_events(scene: dict[str, Any]) -> list[tuple[float, str, str]]:
     from .body.lower_body import read_gait_events
     from .scene import _read_motion, repeated_markers
 
-    t_settle, seen, out, half = scene["solver"]["settle_time"], set(), set(), 0.0
-    for seg in scene["body"]:
-        key = (seg.get("file"), tuple(seg.get("window") or ()))
-        if seg["type"] != "mocap" or key in seen or Path(seg["file"]).suffix.lower() != ".c3d":
+    t_settle, seen, out, half = scene.solver.settle_time, set(), set(), 0.0
+    for seg in scene.body:
+        key = (seg.file, seg.window or ())
+        if seg.type != "mocap" or key in seen or Path(seg.file).suffix.lower() != ".c3d":
             continue
         seen.add(key)
-        markers = _read_motion(Path(seg["file"]))
-        first = _window(markers, seg["window"]).times
-        T = repeated_markers(seg, markers).cycle_time if seg["repeat"] > 1 else 0.0
+        markers = _read_motion(Path(seg.file))
+        first = _window(markers, seg.window).times
+        T = repeated_markers(seg, markers).cycle_time if seg.repeat > 1 else 0.0
         half = 0.5 * float(np.median(np.diff(first)))  # events lie between frames
-        for e in read_gait_events(seg["file"]):
-            if not seg["window"][0] - half <= e.time <= seg["window"][1] + half:
+        for e in read_gait_events(seg.file):
+            if not seg.window[0] - half <= e.time <= seg.window[1] + half:
                 continue
-            for k in range(seg["repeat"]):
+            for k in range(seg.repeat):
                 t = round(t_settle + e.time - first[0] + k * T, 9)
                 out.add((t, e.context, e.label))
     kept: list[tuple[float, str, str]] = []
@@ -230,7 +230,7 @@ def recorded_events(scene: dict[str, Any]) -> list[tuple[float, str, str]]:
     return kept
 
 
-def write_events(scene: dict[str, Any], out: Path, comm: MPI.Comm, summary: dict) -> list:
+def write_events(scene: Scene, out: Path, comm: MPI.Comm, summary: dict) -> list:
     """``out/events.csv`` (time_s, context, label) of :func:`recorded_events` (rank 0), also
     in ``summary["gait_events"]``; nothing without events."""
     events = recorded_events(scene) if comm.rank == 0 else None
@@ -251,104 +251,104 @@ def summary_events(summary: dict[str, Any]) -> list[tuple[float, str, str]]:
     return [(e["time"], e["context"], e["label"]) for e in summary.get("gait_events", ())]
 
 
-def torque_centre(scene: dict[str, Any]) -> np.ndarray | None:
+def torque_centre(scene: Scene) -> np.ndarray | None:
     """Eq. 28 centre J in m: ``contact.torque_point`` or the hinge torque segment's joint;
     None for a recorded torque segment (J moves: :mod:`clothfem.torque_measure`)."""
-    c = scene["contact"]
-    if c["torque_point"] is not None:
-        return np.asarray(c["torque_point"], dtype=float)
-    seg = scene["body"][torque_segment_index(scene)]
-    return np.asarray(seg["joint"], dtype=float) if seg["type"] == "hinge" else None
+    c = scene.contact
+    if c.torque_point is not None:
+        return np.asarray(c.torque_point, dtype=float)
+    seg = scene.body[torque_segment_index(scene)]
+    return np.asarray(seg.joint, dtype=float) if seg.type == "hinge" else None
 
 
-def _torque_where(scene: dict[str, Any]) -> str:
+def _torque_where(scene: Scene) -> str:
     """The log's words for J, AJ and the flexion axis of the Eq. 28 measure."""
-    c, body = scene["contact"], scene["body"]
+    c, body = scene.contact, scene.body
     k = torque_segment_index(scene)
     J = torque_centre(scene)
     where = (
         f"J = {J.tolist()} m"
         if J is not None
-        else f"the moving joint J1 of {body[k]['name']} (Eq. 27 frame), torque_flex about "
-        f"+-{c['flexion_axis']} of {c['flexion_frame'] or body[k]['name']} (flexion positive)"
+        else f"the moving joint J1 of {body[k].name} (Eq. 27 frame), torque_flex about "
+        f"+-{c.flexion_axis} of {c.flexion_frame or body[k].name} (flexion positive)"
     )
-    if c["aj"] == "all":
+    if c.aj == "all":
         return f"{where} over AJ = all"
-    also = "" if not c["torque_with"] else f" and {', '.join(c['torque_with'])}"
-    return f"{where} over AJ = {c['aj']} of {body[k]['name']}{also}"
+    also = "" if not c.torque_with else f" and {', '.join(c.torque_with)}"
+    return f"{where} over AJ = {c.aj} of {body[k].name}{also}"
 
 
-def contact_log(scene: dict[str, Any]) -> list[str]:
+def contact_log(scene: Scene) -> list[str]:
     """Log lines describing the body, contact and friction a scene builds."""
     segs = []
-    for seg in scene["body"]:
-        r = ", ".join(f"{v:g}" for v in seg["radii"])
-        if seg["type"] == "fixed":
-            segs.append(f"{seg['name']} fixed (radii {r} m)")
-        elif seg["type"] == "keyframes":
-            n, t = len(seg["times"]), seg["times"][-1]
-            segs.append(f"{seg['name']} keyframes, {n} poses over {t:g} s (radii {r} m)")
-        elif seg["type"] == "mocap":
-            w = seg["window"]
+    for seg in scene.body:
+        r = ", ".join(f"{v:g}" for v in seg.radii)
+        if seg.type == "fixed":
+            segs.append(f"{seg.name} fixed (radii {r} m)")
+        elif seg.type == "keyframes":
+            n, t = len(seg.times), seg.times[-1]
+            segs.append(f"{seg.name} keyframes, {n} poses over {t:g} s (radii {r} m)")
+        elif seg.type == "mocap":
+            w = seg.window
             rep = (
-                f", a repeated cycle: {seg['repeat']} copies shifted by the stride of "
-                f"{'/'.join(seg['stride_markers'])}, blended over {seg['repeat_blend']:g} s"
-                if seg["repeat"] > 1
+                f", a repeated cycle: {seg.repeat} copies shifted by the stride of "
+                f"{'/'.join(seg.stride_markers)}, blended over {seg.repeat_blend:g} s"
+                if seg.repeat > 1
                 else ""
             )
             segs.append(
-                f"{seg['name']} motion capture {Path(seg['file']).name} {w[0]:g}-{w[1]:g} s"
-                f"{rep} (placed by {seg['placed_by']}; radii {r} m)"
+                f"{seg.name} motion capture {Path(seg.file).name} {w[0]:g}-{w[1]:g} s"
+                f"{rep} (placed by {seg.placed_by}; radii {r} m)"
             )
         else:
             segs.append(
-                f"{seg['name']} hinge about {seg['hinge_axis']} through {seg['joint']} m to "
-                f"{seg['angle_max']:g} deg (radii {r} m)"
+                f"{seg.name} hinge about {list(seg.hinge_axis)} through {list(seg.joint)} m to "
+                f"{seg.angle_max:g} deg (radii {r} m)"
             )
-    c = scene["contact"]
-    integrator = scene["solver"]["integrator"]
+    c = scene.contact
+    integrator = scene.solver.integrator
     if integrator == "static":
         how = (
-            f"quasi-static, settle {'on' if c['settle'] else 'off'}, {c['increments']} motion "
+            f"quasi-static, settle {'on' if c.settle else 'off'}, {c.increments} motion "
             "increments, "
         )
     else:
-        how = f"dynamic ({integrator}), settling {scene['solver']['settle_time']:g} s, "
-    film = c["method"] == "film"
+        how = f"dynamic ({integrator}), settling {scene.solver.settle_time:g} s, "
+    film = c.method == "film"
     return [
         f"body: {len(segs)} rigid ellipsoid(s): " + "; ".join(segs),
-        f"contact: {c['method']} "
+        f"contact: {c.method} "
         + (
-            f"(forward-increment Lagrange multipliers, non-resilient, {c['kernel']} kernel), "
+            f"(forward-increment Lagrange multipliers, non-resilient, {c.kernel} kernel), "
             if film
             else "(implicit Lagrange multipliers, active set), "
         )
         + how
         + f"torque about {_torque_where(scene)}",
         (
-            f"friction: Coulomb mu {c['mu']:g} "
+            f"friction: Coulomb mu {c.mu:g} "
             + ("(limits each step's tangential impulse)" if film else "(regularised return map)")
-            if c["mu"] > 0
+            if c.mu > 0
             else "friction: not built (mu = 0)"
         ),
         *_torques_log(scene),
     ]
 
 
-def _torques_log(scene: dict[str, Any]) -> list[str]:
+def _torques_log(scene: Scene) -> list[str]:
     """The log line of the ``[[torques]]`` measures (none without)."""
-    if not scene["torques"]:
+    if not scene.torques:
         return []
-    return ["torques: " + ", ".join(f"{t['name']} about {t['segment']}" for t in scene["torques"])]
+    return ["torques: " + ", ".join(f"{t.name} about {t.segment}" for t in scene.torques)]
 
 
-def aj_mask(scene: dict[str, Any], J: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
+def aj_mask(scene: Scene, J: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
     """Reference-coordinate node selector of a hinge's ``beyond_joint`` (None otherwise)."""
-    c = scene["contact"]
-    seg = scene["body"][torque_segment_index(scene)] if c["aj"] == "beyond_joint" else None
-    if seg is None or seg["type"] != "hinge":
+    c = scene.contact
+    seg = scene.body[torque_segment_index(scene)] if c.aj == "beyond_joint" else None
+    if seg is None or seg.type != "hinge":
         return None
-    e1 = np.asarray(seg["axis"], dtype=float)
+    e1 = np.asarray(seg.axis, dtype=float)
     e1 = e1 / np.linalg.norm(e1)
     return lambda X: (X.T - J) @ e1 > 0.0
 
@@ -360,11 +360,11 @@ def measured_hinge(motions, k_torque: int | None) -> HingeMotion | None:
     return motions[k_torque]
 
 
-def body_poses(scene: dict[str, Any], motions: list) -> Callable[[float], tuple[list, list]]:
+def body_poses(scene: Scene, motions: list) -> Callable[[float], tuple[list, list]]:
     """``t -> (ellipsoids, velocities)`` of the dynamic runs: at rest until
     ``solver.settle_time``, then each segment follows its motion."""
-    radii = [np.asarray(seg["radii"], dtype=float) for seg in scene["body"]]
-    t_settle = scene["solver"]["settle_time"]
+    radii = [np.asarray(seg.radii, dtype=float) for seg in scene.body]
+    t_settle = scene.solver.settle_time
     zero = np.zeros(3)
     # poses evaluated once: every segment's until t_settle, a fixed segment's for good
     rest = [m.pose(0.0) for m in motions]
@@ -409,14 +409,14 @@ class RunPlan:
         return [self.angle_at(self.t_end) * q / 4 for q in (1, 2, 3)]
 
 
-def run_plan(scene: dict[str, Any], motions: list) -> RunPlan:
+def run_plan(scene: Scene, motions: list) -> RunPlan:
     k = torque_segment_index(scene)
     hinged = k is not None and isinstance(motions[k], HingeMotion)
-    J = torque_centre(scene) if scene["body"] else np.zeros(3)
-    aj = aj_mask(scene, J) if scene["body"] and J is not None else None
-    t_settle = scene["solver"]["settle_time"]
+    J = torque_centre(scene) if scene.body else np.zeros(3)
+    aj = aj_mask(scene, J) if scene.body and J is not None else None
+    t_settle = scene.solver.settle_time
     moving = [m for m in motions if not isinstance(m, FixedMotion)]
-    t_end = scene["solver"]["duration"]
+    t_end = scene.solver.duration
     if t_end is None:
         t_end = t_settle + max((m.t_end for m in moving), default=0.0)
     return RunPlan(
@@ -426,7 +426,7 @@ def run_plan(scene: dict[str, Any], motions: list) -> RunPlan:
         aj=aj,
         hinge_axis=np.asarray(motions[k].axis) if hinged else np.zeros(3),
         hinged=hinged,
-        measure=torque_measure(scene, motions, reference_mask=aj) if scene["body"] else None,
+        measure=torque_measure(scene, motions, reference_mask=aj) if scene.body else None,
         t_settle=t_settle,
         t_end=t_end,
     )

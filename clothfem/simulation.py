@@ -67,6 +67,7 @@ from .scene_body import (
     write_events,
 )
 from .shell import ShellModel
+from .spec import Scene
 from .static import SolverDivergence
 from .torque_measure import torque_segment_index
 from .torque_table import TorqueTable
@@ -93,13 +94,13 @@ class Control:
         return "settle" if t <= self.t_settle + 1e-12 else "motion"
 
 
-def control_from_scene(scene: dict[str, Any], motions: list, t_end: float) -> Control:
+def control_from_scene(scene: Scene, motions: list, t_end: float) -> Control:
     """The :class:`Control` of a validated dynamic scene."""
-    t_ramp = scene["solver"]["ramp_time"]
+    t_ramp = scene.solver.ramp_time
     return Control(
         load=(lambda t: min(t / t_ramp, 1.0)) if t_ramp > 0 else (lambda t: 1.0),
         bodies_at=body_poses(scene, motions),
-        t_settle=scene["solver"]["settle_time"],
+        t_settle=scene.solver.settle_time,
         t_end=t_end,
     )
 
@@ -247,15 +248,15 @@ class _Explicit:
     impulsive = True
     label = "explicit run"
 
-    def __init__(self, scene, model: ShellModel, control: Control, comm, *, data) -> None:
+    def __init__(self, scene: Scene, model: ShellModel, control: Control, comm, *, data) -> None:
         from .contact.film import FilmContact, FilmParameters
         from .contact.self_contact import SelfContact
         from .dynamics import DynamicsDivergence, ShellSystem
 
         self.failures = (DynamicsDivergence, FloatingPointError)
         self.scene, self.model, self.control, self.comm = scene, model, control, comm
-        sv, c = scene["solver"], scene["contact"]
-        self.system = ShellSystem(model, rotary_scale=sv["rotary_scale"])
+        sv, c = scene.solver, scene.contact
+        self.system = ShellSystem(model, rotary_scale=sv.rotary_scale)
         self.start: dict[str, Any] = {"step": 0, "v": None, "a": None, "clock": None}
         self.start["work"] = (0.0, 0.0)
         self.self_max = self.self_left = 0
@@ -269,16 +270,16 @@ class _Explicit:
             f"dt {self.dt:.4e} s"
         )
         self.fc = None
-        if scene["body"]:
+        if scene.body:
             self.fc = FilmContact(
                 self.system,
                 control.bodies_at,
-                params=FilmParameters(mu=c["mu"], kernel=c["kernel"]),
+                params=FilmParameters(mu=c.mu, kernel=c.kernel),
             )
             if data is not None:
                 self.fc.dissipation_total = float(data["contact_dissipation"])
         # fabric self-contact (contact.self_contact): FILM, then the self-contact correction
-        self.sc = SelfContact.from_scene(self.system, c, film=self.fc) if scene["body"] else None
+        self.sc = SelfContact.from_scene(self.system, c, film=self.fc) if scene.body else None
         rank0_print(f"  self-contact: {'built' if self.sc is not None else 'not built'}")
         self.X = self.fc.X if self.fc is not None else None
         self.area = None
@@ -294,7 +295,7 @@ class _Explicit:
         from .shell.viscosity import explicit_step_factor
 
         self.st = stable_time_step(self.system, lam=self.control.load(0.0), iterations=600)
-        self.dt = self.scene["solver"]["safety"] * self.st.dt_crit
+        self.dt = self.scene.solver.safety * self.st.dt_crit
         visc, mat = self.model.material.viscosity, self.model.material
         if visc is not None:  # the damped central difference's smaller stable step
             factor = explicit_step_factor(
@@ -325,7 +326,7 @@ class _Explicit:
         """The central difference from the start (or the checkpoint's) state."""
         from .dynamics import Damping, ExplicitStepper
 
-        sv = self.scene["solver"]
+        sv = self.scene.solver
         return ExplicitStepper(
             self.system,
             t_end=self.control.t_end,
@@ -333,14 +334,14 @@ class _Explicit:
             load=self.control.load,
             stable=self.st,
             contact=self.fc if self.sc is None else self.sc,
-            safety=sv["safety"],
-            recheck_every=sv["recheck_every"],
+            safety=sv.safety,
+            recheck_every=sv.recheck_every,
             clock=self.start["clock"],
             work=self.start["work"],
             first_step=self.start["step"],
             velocity=self.start["v"],
             acceleration=self.start["a"],
-            damping=Damping(mass=sv["settle_damping"]),
+            damping=Damping(mass=sv.settle_damping),
             damping_until=self.control.t_settle,
         )
 
@@ -488,7 +489,7 @@ class _Newmark:
     impulsive = False
     label = "dynamic contact"
 
-    def __init__(self, scene, model: ShellModel, control: Control, comm, *, data) -> None:
+    def __init__(self, scene: Scene, model: ShellModel, control: Control, comm, *, data) -> None:
         from .contact.dynamic import DynamicContact
         from .contact.lagrange import ContactDivergence, LagrangeContactParameters
         from .contact.self_barrier import SelfBarrier
@@ -496,9 +497,9 @@ class _Newmark:
 
         self.failures = (ContactDivergence,)
         self.scene, self.model, self.control, self.comm = scene, model, control, comm
-        c, sv = scene["contact"], scene["solver"]
-        gamma = sv["gamma"]
-        system = ShellSystem(model, rotary_scale=sv["rotary_scale"])
+        c, sv = scene.contact, scene.solver
+        gamma = sv.gamma
+        system = ShellSystem(model, rotary_scale=sv.rotary_scale)
         # fabric self-contact (contact.self_contact): a barrier in every step's Newton system
         self.sc = SelfBarrier.from_scene(system, c)
         rank0_print(f"  self-contact: {'built' if self.sc is not None else 'not built'}")
@@ -507,10 +508,10 @@ class _Newmark:
             system,
             control.bodies_at,
             params=LagrangeContactParameters(
-                mu=c["mu"],
-                tangential_penalty=c["tangential_penalty"],
-                semismooth_passes=c["semismooth_passes"],
-                newton_stall_limit=c["newton_stall_limit"],
+                mu=c.mu,
+                tangential_penalty=c.tangential_penalty,
+                semismooth_passes=c.semismooth_passes,
+                newton_stall_limit=c.newton_stall_limit,
             ),
             beta=(gamma + 0.5) ** 2 / 4,
             gamma=gamma,
@@ -532,9 +533,9 @@ class _Newmark:
         return self.dc.reached(self.control.t_end)
 
     def step(self, *, ends_row: Callable[[float], bool]) -> StepInfo:
-        sv = self.scene["solver"]
+        sv = self.scene.solver
         r = self.last = self.dc.advance(
-            t_end=self.control.t_end, dt=sv["dt"], dt_min=sv["dt_min"], load=self.control.load
+            t_end=self.control.t_end, dt=sv.dt, dt_min=sv.dt_min, load=self.control.load
         )
         self.cut += r.cutbacks
         self.newton += r.contact.newton_iterations
@@ -641,7 +642,7 @@ class _NewmarkFree:
     label = "newmark run"
     X = None
 
-    def __init__(self, scene, model: ShellModel, control: Control, comm, *, data) -> None:
+    def __init__(self, scene: Scene, model: ShellModel, control: Control, comm, *, data) -> None:
         from .dynamics import (
             DynamicsDivergence,
             ImplicitScheme,
@@ -652,14 +653,14 @@ class _NewmarkFree:
 
         self.failures = (DynamicsDivergence,)
         self.model, self.control = model, control
-        sv = scene["solver"]
-        system = ShellSystem(model, rotary_scale=sv["rotary_scale"])
-        gamma = sv["gamma"]
+        sv = scene.solver
+        system = ShellSystem(model, rotary_scale=sv.rotary_scale)
+        gamma = sv.gamma
         self.cut = self.newton = 0  # totals of the run
         start = self._restore(system, data) if data is not None else _ImplicitStart()
         self.stepper = ImplicitStepper(
             system,
-            stepping=TimeStepping(dt=sv["dt"], t_end=control.t_end, dt_min=sv["dt_min"]),
+            stepping=TimeStepping(dt=sv.dt, t_end=control.t_end, dt_min=sv.dt_min),
             scheme=ImplicitScheme.newmark(beta=(gamma + 0.5) ** 2 / 4, gamma=gamma),
             load=control.load,
             velocity=start.v,
@@ -732,10 +733,10 @@ class _NewmarkFree:
         )
 
 
-def _integrator(scene: dict[str, Any]) -> type:
+def _integrator(scene: Scene) -> type:
     """The integrator class of a scene (Newmark without a body: no contact)."""
-    name = scene["solver"]["integrator"]
-    if name == "newmark" and not scene["body"]:
+    name = scene.solver.integrator
+    if name == "newmark" and not scene.body:
         return _NewmarkFree
     return {"explicit": _Explicit, "newmark": _Newmark}[name]
 
@@ -744,7 +745,7 @@ class _Run:
     """The runner's loop body: measures, rows, fields, checkpoints, progress and stop checks
     of any :class:`Integrator` (see :func:`run_dynamic`)."""
 
-    def __init__(self, scene, out: Path, *, model, comm, plan, control, integ, data, t0,
+    def __init__(self, scene: Scene, out: Path, *, model, comm, plan, control, integ, data, t0,
                  check_stop, summary):  # fmt: skip
         motions = plan.motions
         self.plan, self.control = plan, control
@@ -754,7 +755,7 @@ class _Run:
         self.c = _Counters.from_arrays(data) if data is not None else _Counters()
         self.fixed = plan.measure.fixed_mask(integ.X) if plan.measure is not None else None
         self.table = None  # the [[torques]] measures (a body is required by the validation)
-        if scene["torques"]:
+        if scene.torques:
             self.table = TorqueTable(scene, motions, integ.X, aj_mask=aj_mask, centre=torque_centre)
         hinge = measured_hinge(motions, plan.k_torque)
         self.work = _JointWork(
@@ -765,7 +766,7 @@ class _Run:
         self.local = np.zeros(7)  # this rank's torque (3), resultant (3), flexion of the row
         self.k = 0  # steps in the row
         self.pressure = None  # Pa, nodal (multipliers / reference lumped area)
-        if scene["body"]:
+        if scene.body:
             S = fem.FunctionSpace(model.mesh, model.V.ufl_element().sub_elements()[0])
             self.pressure = fem.Function(S, name="contact_pressure")
         self.t_row = time.perf_counter()
@@ -777,7 +778,7 @@ class _Run:
         integrator; else one per ``output.interval`` and the last step)."""
         if not self.integ.impulsive:
             return True
-        interval = self.scene["output"]["interval"]
+        interval = self.scene.output.interval
         return t >= (self.c.row + 1) * interval - 1e-12 or t >= self.plan.t_end - 1e-12
 
     def fields(self) -> tuple[fem.Function, ...]:
@@ -791,7 +792,7 @@ class _Run:
     def snapshot(self, tag: str, t: float) -> None:
         """``snapshot_<tag>.png`` of the state at ``t`` (collective)."""
         self.fields()
-        bodies = self.control.bodies_at(t)[0] if self.scene["body"] else []
+        bodies = self.control.bodies_at(t)[0] if self.scene.body else []
         write_snapshot(
             self.scene, self.model, self.out, self.comm, tag, bodies, pressure=self.pressure
         )
@@ -834,8 +835,8 @@ class _Run:
         return tau, res, flex, k, sums[7:]
 
     def _row(self, info: StepInfo, writer: ResultWriter, progress: Progress) -> None:
-        t, c, o = info.time, self.c, self.scene["output"]
-        frame = (c.row + 1) % o["every"] == 0 or t >= self.plan.t_end - 1e-12  # and the last
+        t, c, o = info.time, self.c, self.scene.output
+        frame = (c.row + 1) % o.every == 0 or t >= self.plan.t_end - 1e-12  # and the last
         integ_row = self.integ.row(frame=frame)  # collective
         c.row += 1
         tau, res, flex, k, work_parts = self._reduce()
@@ -868,7 +869,7 @@ class _Run:
         self.t_row = now
         c.pen, c.time = max(c.pen, row["max_penetration"]), t
         writer.append_row(row)
-        every = o["checkpoint_every"]
+        every = o.checkpoint_every
         self.due = bool(every) and c.row % every == 0
         self.summary.update(final_angle_deg=angle, time=t, steps=c.step, max_penetration=c.pen)
         self.summary.update(self.integ.summary())
@@ -881,7 +882,7 @@ class _Run:
     def _progress(self, row: dict[str, Any], progress: Progress) -> None:
         t, end = row["time"], self.plan.t_end
         head = f"t {t:7.4f} s  "
-        if self.scene["body"]:
+        if self.scene.body:
             head += f"angle {row['angle_deg']:6.2f} deg  |tau| {row['torque_mag']:.4f} N m  "
         frac = min(max(t / end, 0.0), 1.0) if end > 0 else 1.0
         progress.update(
@@ -897,7 +898,7 @@ class _Run:
 
 
 def run_dynamic(
-    scene: dict[str, Any],
+    scene: Scene,
     out: Path,
     *,
     model: ShellModel,
@@ -926,7 +927,7 @@ def run_dynamic(
         if run.table is not None:
             keep_torque_rows(out, keep, comm)
     model.u.name = "displacement"
-    end, name = plan.t_end, scene["scene"]["name"]
+    end, name = plan.t_end, scene.scene.name
     progress = Progress(
         label=name, comm=comm, start=min(max(run.c.time / end, 0.0), 1.0) if end > 0 else 0.0
     )
@@ -945,18 +946,18 @@ def run_dynamic(
         finally:
             progress.close()
             end_together(comm)
-            if scene["output"]["png"] and comm.rank == 0 and writer.csv_path.exists():
+            if scene.output.png and comm.rank == 0 and writer.csv_path.exists():
                 _plots(scene, out, writer.csv_path, summary, control)
     return out
 
 
-def _plots(scene, out: Path, csv_path: Path, summary, control: Control) -> None:
+def _plots(scene: Scene, out: Path, csv_path: Path, summary, control: Control) -> None:
     """The torque plots and the animation of a run (rank 0)."""
-    name, events = scene["scene"]["name"], summary_events(summary)
-    if scene["body"]:
+    name, events = scene.scene.name, summary_events(summary)
+    if scene.body:
         plot_torque_angle(csv_path, out / "torque_angle.png", name, events)
-    if scene["torques"]:
+    if scene.torques:
         k = torque_segment_index(scene)
-        primary = scene["body"][k]["name"] if k is not None else "[contact]"
+        primary = scene.body[k].name if k is not None else "[contact]"
         plot_torques(out, out / "torques.png", primary=primary, title=name, events=events)
     write_animation(scene, out, lambda t: control.bodies_at(t)[0])

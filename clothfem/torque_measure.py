@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .contact.forces import joint_torque
+from .spec import Scene
 
 __all__ = ["TorqueMeasure", "torque_measure", "torque_segment_index"]
 
@@ -113,12 +114,12 @@ class TorqueMeasure:
         return tau, float(tau @ self.axis_at(t))
 
 
-def torque_segment_index(scene: dict[str, Any]) -> int | None:
+def torque_segment_index(scene: Scene) -> int | None:
     """Index of the torque segment: ``contact.torque_segment`` (a hinge or a recorded
     segment), else the first hinge; None if there is none."""
-    named = scene["contact"]["torque_segment"]
-    for i, seg in enumerate(scene["body"]):
-        if (named is None and seg["type"] == "hinge") or seg["name"] == named:
+    named = scene.contact.torque_segment
+    for i, seg in enumerate(scene.body):
+        if (named is None and seg.type == "hinge") or seg.name == named:
             return i
     return None
 
@@ -144,7 +145,7 @@ def _constant(v: Any) -> Callable[[float], FloatArray]:
 
 
 def torque_measure(
-    scene: dict[str, Any],
+    scene: Scene,
     motions: list,
     *,
     reference_mask: Callable[[FloatArray], NDArray[np.bool_]] | None,
@@ -152,25 +153,25 @@ def torque_measure(
     """The measure of a validated body scene; ``motions`` from
     :func:`clothfem.scene_body.body_motions`; ``reference_mask`` the hinge ``beyond_joint``
     selector (:func:`clothfem.scene_body.aj_mask`)."""
-    c, body = scene["contact"], scene["body"]
+    c, body = scene.contact, scene.body
     k = torque_segment_index(scene)
-    t_settle = scene["solver"]["settle_time"]
+    t_settle = scene.solver.settle_time
     segments = tuple([k] if k is not None else [])
-    names = [seg["name"] for seg in body]
-    segments += tuple(names.index(n) for n in c["torque_with"] or ())
-    if k is None or body[k]["type"] != "mocap":
-        centre = c["torque_point"] if c["torque_point"] is not None else body[k]["joint"]
+    names = [seg.name for seg in body]
+    segments += tuple(names.index(n) for n in c.torque_with or ())
+    if k is None or body[k].type != "mocap":
+        centre = c.torque_point if c.torque_point is not None else body[k].joint
         axis = np.asarray(motions[k].axis, dtype=float) if k is not None else np.zeros(3)
         return TorqueMeasure(
-            mode=c["aj"],
+            mode=c.aj,
             centre_at=_constant(centre),
             axis_at=_constant(axis),
             reference_mask=reference_mask,
             segments=segments,
         )
     seg_motion = motions[k]
-    frame = motions[names.index(c["flexion_frame"] or body[k]["name"])]
-    column = {"e2": 1, "e3": 2}[c["flexion_axis"]]
+    frame = motions[names.index(c.flexion_frame or body[k].name)]
+    column = {"e2": 1, "e3": 2}[c.flexion_axis]
     sign = _flexion_sign(frame, seg_motion, column)
 
     def clock(t: float) -> float:
@@ -179,9 +180,9 @@ def torque_measure(
     def joint(t: float) -> FloatArray:
         return seg_motion.joint(clock(t))
 
-    centre = _constant(c["torque_point"]) if c["torque_point"] is not None else joint
+    centre = _constant(c.torque_point) if c.torque_point is not None else joint
     return TorqueMeasure(
-        mode=c["aj"],
+        mode=c.aj,
         centre_at=centre,
         axis_at=lambda t: sign * frame.pose(clock(t)).rotation[:, column],
         normal_at=lambda t: seg_motion.pose(clock(t)).rotation[:, 0],

@@ -15,13 +15,13 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from mpi4py import MPI
 from numpy.typing import NDArray
 
 from .scene import torque_entry
+from .spec import Scene
 from .torque_measure import TorqueMeasure, torque_measure
 
 __all__ = ["COLUMNS", "FILE", "TorqueTable", "append", "keep_rows", "plot", "torque_stats"]
@@ -53,7 +53,7 @@ class TorqueTable:
 
     def __init__(
         self,
-        scene: dict[str, Any],
+        scene: Scene,
         motions: list,
         X: NDArray[np.float64],
         *,
@@ -61,11 +61,11 @@ class TorqueTable:
         centre: Callable,
     ) -> None:
         self.entries: list[_Entry] = []
-        for spec in scene["torques"]:
+        for spec in scene.torques:
             s = torque_entry(scene, spec)
             J = centre(s)
             m = torque_measure(s, motions, reference_mask=aj_mask(s, J) if J is not None else None)
-            self.entries.append(_Entry(spec["name"], m, m.fixed_mask(X)))
+            self.entries.append(_Entry(spec.name, m, m.fixed_mask(X)))
         self.sums = np.zeros((len(self.entries), 4))  # tau (3) and flex, summed over steps
 
     def __len__(self) -> int:

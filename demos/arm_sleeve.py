@@ -62,5 +62,5 @@ if MPI.COMM_WORLD.rank == 0:
     for a in (10.0, 20.0, 30.0, 40.0, 50.0, 57.0):  # (those reached)
         if a <= final + 1e-9:
             print(f"torque at {a:4.1f} deg = {torque_at(angle, torque, a):.4f} N m")
-    target = next(s["angle_max"] for s in scene["body"] if s["type"] == "hinge")
+    target = next(s.angle_max for s in scene.body if s.type == "hinge")
     print(f"reached {final:.1f} deg of {target:g}; torque there = {torque[-1]:.4f} N m")

@@ -82,6 +82,7 @@ import numpy as np
 from numpy.typing import NDArray
 from petsc4py import PETSc
 
+from ..spec import ContactSpec
 from .self_contact import (
     CandidateList,
     FabricSurface,
@@ -488,10 +489,10 @@ class SelfBarrier:
         return int(self.comm.bcast(count, root=0))
 
     @classmethod
-    def from_scene(cls, system, contact: dict) -> SelfBarrier | None:
+    def from_scene(cls, system, contact: ContactSpec) -> SelfBarrier | None:
         """From a scene's ``contact`` section: None unless ``self_contact`` is true; the
         activation distance ``self_distance`` [m] (default: the fabric thickness)."""
-        if not contact.get("self_contact", False):
+        if not contact.self_contact:
             return None
-        d = contact.get("self_distance") or system.model.thickness
+        d = contact.self_distance or system.model.thickness
         return cls(system, params=SelfBarrierParameters(distance=d))

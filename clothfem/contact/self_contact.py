@@ -46,6 +46,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from ..spec import ContactSpec
+
 __all__ = [
     "CandidateList",
     "FabricSurface",
@@ -1692,13 +1694,13 @@ class SelfContact:
         return int(self.comm.bcast(count, root=0))
 
     @classmethod
-    def from_scene(cls, system, contact: dict, *, film=None) -> SelfContact | None:
+    def from_scene(cls, system, contact: ContactSpec, *, film=None) -> SelfContact | None:
         """From a scene's ``contact`` section: None unless ``self_contact`` is true; the
         distance ``self_distance`` [m] (default: the fabric thickness) and ``self_mu``
         (default: ``mu``)."""
-        if not contact.get("self_contact", False):
+        if not contact.self_contact:
             return None
-        d = contact.get("self_distance") or system.model.thickness
-        mu = contact.get("self_mu")
-        mu = contact.get("mu", 0.0) if mu is None else mu
+        d = contact.self_distance or system.model.thickness
+        mu = contact.self_mu
+        mu = contact.mu if mu is None else mu
         return cls(system, params=SelfContactParameters(distance=d, mu=mu), film=film)

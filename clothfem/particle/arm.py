@@ -38,6 +38,7 @@ import numpy as np
 from mpi4py import MPI
 
 from clothfem.scene import SceneError
+from clothfem.spec import Scene
 
 __all__ = ["ArmRun", "run_arm"]
 
@@ -60,7 +61,7 @@ class ArmRun:
     seconds: float
 
 
-def _scene(path: str, mesh: tuple[int, int], angle: float | None, mu: float | None) -> dict:
+def _scene(path: str, mesh: tuple[int, int], angle: float | None, mu: float | None) -> Scene:
     from clothfem import scene as scenes
 
     sets = [f"mesh.n_around={mesh[0]}", f"mesh.n_along={mesh[1]}", "output.png=false"]
@@ -71,7 +72,7 @@ def _scene(path: str, mesh: tuple[int, int], angle: float | None, mu: float | No
     return scenes.load(path, sets)
 
 
-def _model(scene: dict, fabric_from: tuple[int, int] | None, bending: str, scene_path: str):
+def _model(scene: Scene, fabric_from: tuple[int, int] | None, bending: str, scene_path: str):
     """The particle model of a validated arm-sleeve scene (and its network)."""
     from clothfem import particle as pm
     from clothfem.contact.film import FilmParameters
@@ -80,26 +81,26 @@ def _model(scene: dict, fabric_from: tuple[int, int] | None, bending: str, scene
 
     from .sleeve import _transfer
 
-    mat = scene["material"]
-    rule = pm.SpringRule(bending=bending, warp=tuple(mat["warp"]))
+    mat = scene.material
+    rule = pm.SpringRule(bending=bending, warp=tuple(mat.warp))
 
-    def fabric_of(sc: dict):
+    def fabric_of(sc: Scene):
         net = pm.network_from_mesh(build_mesh(sc, MPI.COMM_SELF))
         fab = pm.fabric_from_material(
-            net, material=build_material(mat), thickness=mat["thickness"], rule=rule
+            net, material=build_material(mat), thickness=mat.thickness, rule=rule
         )
         return net, fab
 
     net, fab = fabric_of(scene)
     if fabric_from is not None:  # the spring constants of another mesh, class by class
         fab = _transfer(fab, net, fabric_of(_scene(scene_path, fabric_from, None, None)))
-    (g,) = [ld["acceleration"] for ld in scene["loads"] if ld["type"] == "gravity"]
+    (g,) = [ld.acceleration for ld in scene.loads if ld.type == "gravity"]
     bodies_at = body_poses(scene, body_motions(scene))
-    params = FilmParameters(mu=scene["contact"]["mu"], kernel=scene["contact"]["kernel"])
+    params = FilmParameters(mu=scene.contact.mu, kernel=scene.contact.kernel)
     model = pm.ParticleModel(
         network=net,
         fabric=fab,
-        fixed=net.nodes(scene["supports"][0]["where"]),
+        fixed=net.nodes(scene.supports[0].where),
         gravity=tuple(g),
         bodies=bodies_at,
         contact=params,
@@ -131,7 +132,7 @@ def run_arm(
     plan = run_plan(scene, body_motions(scene))
     aj = np.asarray(plan.aj(net.x0.T), dtype=bool)
     dt = safety * pm.stable_time_step(model)
-    interval = scene["output"]["interval"]
+    interval = scene.output.interval
     state = pm.ParticleState.at_rest(model)
     rows: list[tuple[float, float, float, float, int]] = []
     acc, k, row_end = np.zeros(3), 0, interval
@@ -216,9 +217,7 @@ def main() -> None:
     args = parser.parse_args()
     out = Path(args.out)
     try:
-        settles = [
-            _scene(args.scene, m, args.angle, args.mu)["solver"]["settle_time"] for m in args.mesh
-        ]
+        settles = [_scene(args.scene, m, args.angle, args.mu).solver.settle_time for m in args.mesh]
     except SceneError as exc:  # before anything is written
         _print(f"clothfem.particle.arm: {exc}")
         raise SystemExit(2) from None

@@ -36,12 +36,14 @@ from pathlib import Path
 
 import numpy as np
 
+from clothfem.spec import Scene
+
 __all__ = ["main"]
 
 COLUMNS = ["stage", "time", "angle_deg", "torque_mag", "torque_flex", "n_active", "elapsed"]
 
 
-def _model(scene: dict, motions: list):
+def _model(scene: Scene, motions: list):
     """The particle model of a validated walk scene, and its network."""
     from mpi4py import MPI
 
@@ -52,39 +54,39 @@ def _model(scene: dict, motions: list):
 
     from .donning import simple_fabric
 
-    mat = scene["material"]
+    mat = scene.material
     net = pm.network_from_mesh(build_mesh(scene, MPI.COMM_SELF))
     fab = simple_fabric(
         network=net,
-        E=float(np.sqrt(mat["E1"] * mat["E2"])),
-        G=mat["G12"],
-        rho=mat["rho"],
-        thickness=mat["thickness"],
+        E=float(np.sqrt(mat.E1 * mat.E2)),
+        G=mat.G12,
+        rho=mat.rho,
+        thickness=mat.thickness,
     )
-    (g,) = [ld["acceleration"] for ld in scene["loads"] if ld["type"] == "gravity"]
+    (g,) = [ld.acceleration for ld in scene.loads if ld.type == "gravity"]
     model = pm.ParticleModel(
         network=net,
         fabric=fab,
         gravity=tuple(g),
-        damping=pm.Damping(alpha=scene["solver"]["settle_damping"]),
+        damping=pm.Damping(alpha=scene.solver.settle_damping),
         bodies=body_poses(scene, motions),
-        contact=FilmParameters(mu=scene["contact"]["mu"], kernel=scene["contact"]["kernel"]),
+        contact=FilmParameters(mu=scene.contact.mu, kernel=scene.contact.kernel),
     )
     return model, net
 
 
-def _start(scene: dict, net, model):
+def _start(scene: Scene, net, model):
     """The state at the donned positions, at rest."""
     from clothfem import particle as pm
     from clothfem.initial_state import displacement_at_nodes, read_positions
 
-    X, x = read_positions(Path(scene["initial"]["positions"]))
+    X, x = read_positions(Path(scene.initial.positions))
     u = displacement_at_nodes(nodes=net.x0, X=X, x=x)
     rest = pm.ParticleState.at_rest(model)
     return dataclasses.replace(rest, x=net.x0 + u)
 
 
-def walk(scene: dict, out: Path, *, safety: float = 0.9) -> dict:
+def walk(scene: Scene, out: Path, *, safety: float = 0.9) -> dict:
     """Run the walk of a validated scene, writing the rows to ``out`` (module docstring);
     returns the cost (steps, dt [s], seconds)."""
     from clothfem import particle as pm
@@ -99,7 +101,7 @@ def walk(scene: dict, out: Path, *, safety: float = 0.9) -> dict:
     state = _start(scene, net, model)
     undamped = dataclasses.replace(model, damping=pm.Damping())
     dt = safety * pm.stable_time_step(model)
-    interval, t_settle = scene["output"]["interval"], plan.t_settle
+    interval, t_settle = scene.output.interval, plan.t_settle
     with (out / "events.csv").open("w", newline="") as fh:
         csv.writer(fh).writerows([("time_s", "context", "label"), *recorded_events(scene)])
     steps, acc, k, row_end = 0, np.zeros(4), 0, interval

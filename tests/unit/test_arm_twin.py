@@ -95,7 +95,7 @@ def test_integrator_switch_removes_the_scene_keys_of_the_other_integrators(tmp_p
     assert unset == [*dynamic, "output.checkpoint_every"]
     assert add == ["solver.steps=2", "contact.increments=3"]
     s = C.load_scene(C.SCENE, [*sets, *add], unset=unset)
-    assert s["solver"]["integrator"] == "static" and s["contact"]["increments"] == 3
+    assert s.solver.integrator == "static" and s.contact.increments == 3
     cmd = C.command(C.Case("static", sets), tmp_path)
     assert [cmd[i + 1] for i, w in enumerate(cmd) if w == "--unset"] == unset
     assert cmd[-4:] == ["--set", "solver.steps=2", "--set", "contact.increments=3"]

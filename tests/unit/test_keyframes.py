@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from clothfem import scene as scenes
 from clothfem.scene_body import body_motions, keyframe_motion
+from clothfem.spec import SegmentSpec, section_from_dict
 
 ROOT = Path(__file__).resolve().parents[2]
 CI = ROOT / "demos" / "scenes" / "arm_sleeve_ci.toml"
@@ -18,9 +19,11 @@ EXPLICIT = ["solver.integrator=explicit", "solver.settle_time=0.05", "solver.ram
 UNSET = ["solver.steps", "contact.increments"]
 
 
-def _segment(**keys) -> dict:
-    seg = dict(name="s", axis=[1.0, 0.0, 0.0], up=[0.0, 0.0, 1.0], turns=None)
-    return {**seg, **keys}
+def _segment(**keys) -> SegmentSpec:
+    """A keyframes segment ``keys``, the schema's defaults for the others."""
+    seg = {k: key.default for k, key in scenes.SCHEMA["body"].keys.items()}
+    seg.update(name="s", type="keyframes", axis=[1.0, 0.0, 0.0], up=[0.0, 0.0, 1.0], turns=None)
+    return section_from_dict({**seg, **keys}, section="body")
 
 
 def test_two_keys_move_at_constant_rates_then_rest():

@@ -227,11 +227,11 @@ def test_scene_preset_builds_the_cotton_law():
     from clothfem.run import build_material, build_model
 
     s = scenes.validate(scenes.apply_overrides(SCENE, []))
-    assert build_material(s["material"]) == DecrimpingFabric.cotton()
+    assert build_material(s.material) == DecrimpingFabric.cotton()
     s = scenes.validate(scenes.apply_overrides(SCENE, ["material.E2_decrimped=2e8"]))
-    assert build_material(s["material"]).E2_decrimped == 2e8
+    assert build_material(s.material).E2_decrimped == 2e8
     lin = scenes.validate(scenes.apply_overrides(SCENE, ["material.law='linear'"]))
-    assert type(build_material(lin["material"])) is FabricMaterial
+    assert type(build_material(lin.material)) is FabricMaterial
     bad = [
         (["material.preset='crimped-cotton'", "material.width1=0.1"], "only"),
         (["material.preset='crimped-cotton'", "material.law='decrimping'"], "required with"),

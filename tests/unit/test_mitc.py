@@ -246,12 +246,12 @@ def test_scene_refuses_mitc9_where_it_does_not_apply(overrides):
     path = Path(__file__).parents[2] / "demos" / "scenes" / "arm_sleeve.toml"
     with pytest.raises(scenes.SceneError, match="scene key 'element.scheme': 'mitc9'"):
         scenes.load(path, ["element.scheme=mitc9", *overrides])
-    assert scenes.load(path, ["element.scheme=mitc9"])["element"]["scheme"] == "mitc9"
+    assert scenes.load(path, ["element.scheme=mitc9"]).element.scheme == "mitc9"
     for law in (
         ["material.preset=decrimping-cotton-hysteretic"],
         [f"material.viscosity{k}=1" for k in ("1", "2", "12")],
     ):
-        assert scenes.load(path, ["element.scheme=mitc9", *law])["element"]["scheme"] == "mitc9"
+        assert scenes.load(path, ["element.scheme=mitc9", *law]).element.scheme == "mitc9"
 
 
 # a material with every term the kernels add to the linear law: decrimping (transitions

@@ -38,7 +38,7 @@ def test_repeated_cycle_through_the_scene():
     with the placing transform; away from the 0.05 s seam blends), the motion lasts three
     cycles, and the log says it is a repeated cycle."""
     scene = scenes.validate(_scene())
-    start, end = scene["body"][0]["window"]
+    start, end = scene.body[0].window
     T = end - start
     thigh, shank = body_motions(scene)
     assert thigh.t_end == pytest.approx(3 * T, abs=0.011)

@@ -34,8 +34,8 @@ def _with(path: str, value):
 
 def test_defaults_filled():
     s = scenes.validate(MINIMAL)
-    assert s["solver"]["integrator"] == "static" and s["material"]["nu12"] == 0.0
-    assert s["supports"] == [] and s["mesh"]["order"] == 2
+    assert s.solver.integrator == "static" and s.material.nu12 == 0.0
+    assert s.supports == () and s.mesh.order == 2
 
 
 @pytest.mark.parametrize(
@@ -108,8 +108,8 @@ def test_bad_scenes_one_line_errors(data, message):
 def test_overrides_and_preset():
     data = dict(MINIMAL, material={"preset": "kevlar", "thickness": 1e-3})
     s = scenes.validate(scenes.apply_overrides(data, ["mesh.nx=4", "material.E2=1e9"]))
-    assert s["mesh"]["nx"] == 4 and s["material"]["E1"] == 7.2e9 and s["material"]["E2"] == 1e9
-    assert s["material"]["G12"] == 7.2e9 / 200 and s["material"]["rho"] == 700.0
+    assert s.mesh.nx == 4 and s.material.E1 == 7.2e9 and s.material.E2 == 1e9
+    assert s.material.G12 == 7.2e9 / 200 and s.material.rho == 700.0
     with pytest.raises(scenes.SceneError, match="expected key.path=value"):
         scenes.apply_overrides(MINIMAL, ["mesh.nx"])
 
@@ -119,9 +119,9 @@ def test_hysteretic_preset_builds_yarn_friction():
     from clothfem.shell.hysteresis import COTTON_FRICTION
 
     data = dict(MINIMAL, material={"preset": "decrimping-cotton-hysteretic", "thickness": 1e-3})
-    mat = build_material(scenes.validate(data)["material"])
+    mat = build_material(scenes.validate(data).material)
     assert mat.friction == COTTON_FRICTION and mat.E1_decrimped == 350e6
-    assert build_material(scenes.validate(MINIMAL)["material"]).friction is None
+    assert build_material(scenes.validate(MINIMAL).material).friction is None
 
 
 def test_docs_match_schema():
@@ -242,7 +242,7 @@ def test_mocap_needs_a_dynamic_integrator(capsys):
 def test_mocap_file_relative_to_the_scene():
     """The scene's relative recording path resolves from the scene file's folder."""
     s = scenes.load(MOCAP)
-    assert Path(s["body"][0]["file"]).is_file() and s["body"][1]["placed_by"] == "upper_arm"
+    assert Path(s.body[0].file).is_file() and s.body[1].placed_by == "upper_arm"
 
 
 def test_dynamic_scene_without_a_moving_body_needs_a_duration():
@@ -251,7 +251,7 @@ def test_dynamic_scene_without_a_moving_body_needs_a_duration():
     with pytest.raises(scenes.SceneError, match=r"'solver.duration': required"):
         scenes.validate(data)
     data["solver"]["duration"] = 0.1
-    assert scenes.validate(data)["solver"]["duration"] == 0.1
+    assert scenes.validate(data).solver.duration == 0.1
 
 
 def test_pants_hip_radius_reaches_the_mesh():

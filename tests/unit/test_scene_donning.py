@@ -21,10 +21,10 @@ def test_dimensions_left_out_are_the_fits():
     numbers from the fit (other ease, other dimensions)."""
     given = _load()
     taken = _load(unset=[f"mesh.{k}" for k in DIMENSIONS])
-    assert all(taken["mesh"][k] == given["mesh"][k] for k in DIMENSIONS)
+    assert all(getattr(taken.mesh, k) == getattr(given.mesh, k) for k in DIMENSIONS)
     looser = _load(["donning.ease=0.03"], unset=[f"mesh.{k}" for k in DIMENSIONS])
-    assert looser["mesh"]["leg_radius"] == pytest.approx(given["mesh"]["leg_radius"] + 0.015)
-    assert fit_dimensions(looser) == {k: looser["mesh"][k] for k in DIMENSIONS}
+    assert looser.mesh.leg_radius == pytest.approx(given.mesh.leg_radius + 0.015)
+    assert fit_dimensions(looser) == {k: getattr(looser.mesh, k) for k in DIMENSIONS}
 
 
 @pytest.mark.parametrize(

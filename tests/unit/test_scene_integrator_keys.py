@@ -112,10 +112,10 @@ def test_unset_removes_a_key(capsys):
     unset = ["--unset", "solver.steps", "--unset", "contact.increments"]
     assert main(["validate", str(CI), *switch, *unset]) == 0
     s = scenes.load(CI, unset=["solver.steps", "solver.dt"])
-    assert s["solver"]["steps"] == scenes.SCHEMA["solver"].keys["steps"].default
-    assert scenes.load(CI, ["solver.steps=3"], unset=["solver.steps"])["solver"]["steps"] == 3
+    assert s.solver.steps == scenes.SCHEMA["solver"].keys["steps"].default
+    assert scenes.load(CI, ["solver.steps=3"], unset=["solver.steps"]).solver.steps == 3
     s = scenes.load(ARM, unset=["body.1.omega"])
-    assert s["body"][1]["omega"] == scenes.SCHEMA["body"].keys["omega"].default
+    assert s.body[1].omega == scenes.SCHEMA["body"].keys["omega"].default
 
 
 @pytest.mark.parametrize(

@@ -26,9 +26,9 @@ def test_shipped_pants_walk_lists_left_knee_and_hips():
 
 def test_entry_replaces_the_contact_keys():
     s = _validate([{"name": "lk", "segment": "L_shank", "torque_with": ["L_foot"]}])
-    c = scenes.torque_entry(s, s["torques"][0])["contact"]
-    assert c["torque_segment"] == "L_shank" and c["torque_with"] == ["L_foot"]
-    assert c["aj"] == "touching" and c["flexion_axis"] == "e3" and c["mu"] == s["contact"]["mu"]
+    c = scenes.torque_entry(s, s.torques[0]).contact
+    assert c.torque_segment == "L_shank" and c.torque_with == ("L_foot",)
+    assert c.aj == "touching" and c.flexion_axis == "e3" and c.mu == s.contact.mu
 
 
 @pytest.mark.parametrize(

@@ -183,12 +183,12 @@ def test_scene_keys_build_self_contact_only_when_asked():
 
     path = Path(__file__).parents[2] / "demos" / "scenes" / "arm_sleeve.toml"
     data = scenes.load(path)
-    assert data["contact"]["self_contact"] is False
-    assert sc.SelfContact.from_scene(None, data["contact"]) is None
-    on = scenes.load(path, ["contact.self_contact=true"])["contact"]
-    assert on["self_contact"] is True and on["self_distance"] is None and on["self_mu"] is None
+    assert data.contact.self_contact is False
+    assert sc.SelfContact.from_scene(None, data.contact) is None
+    on = scenes.load(path, ["contact.self_contact=true"]).contact
+    assert on.self_contact is True and on.self_distance is None and on.self_mu is None
     nm = ["solver.integrator='newmark'", "contact.self_contact=true"]
-    assert scenes.load(path, nm + ["contact.self_distance=2e-3"])["contact"]["self_contact"]
+    assert scenes.load(path, nm + ["contact.self_distance=2e-3"]).contact.self_contact
     with pytest.raises(scenes.SceneError, match="contact.self_mu"):
         scenes.load(path, nm + ["contact.self_mu=0.2"])
 

@@ -10,6 +10,7 @@ from clothfem import scene as scenes
 from clothfem.body.gait_repeat import gait_cycle
 from clothfem.body.lower_body import read_gait_events
 from clothfem.scene_body import body_motions, contact_log, recorded_events
+from clothfem.spec import Scene
 from clothfem.torque_measure import TorqueMeasure, torque_measure
 
 SETTLE = 0.1
@@ -33,7 +34,7 @@ def _raw_knee(*, repeat: int = 1, contact: dict | None = None) -> dict:
     }
 
 
-def _knee_scene(*, repeat: int = 1) -> dict:
+def _knee_scene(*, repeat: int = 1) -> Scene:
     return scenes.validate(_raw_knee(repeat=repeat))
 
 
@@ -113,7 +114,7 @@ def test_gait_events_on_the_run_clock():
     (settle time + time since the first played frame); a repeated cycle lists each copy's
     events once (the seam event, foot strike to foot strike, is shared)."""
     scene = _knee_scene()
-    start, end = scene["body"][0]["window"]
+    start, end = scene.body[0].window
     inside = [e for e in read_gait_events(WALK) if start - 0.005 <= e.time <= end + 0.005]
     got = recorded_events(scene)
     assert len(got) == len(inside) >= 2  # this cycle: both right foot strikes at least

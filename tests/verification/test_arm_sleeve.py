@@ -138,7 +138,7 @@ def test_body_and_contact_keys_validate():
     with pytest.raises(scenes.SceneError, match="'contact': needs a body"):
         scenes.validate(no_body)
     s = scenes.validate({k: v for k, v in no_body.items() if k != "contact"})
-    assert s["body"] == [] and s["contact"]["mu"] == 0.0
+    assert s.body == () and s.contact.mu == 0.0
 
 
 def test_arm_sleeve_ci_scene_explicit_with_self_contact(tmp_path, capsys):

@@ -12,6 +12,7 @@ from clothfem import scene as scenes
 from clothfem.report import read_history
 from clothfem.run import run_scene
 from clothfem.scene_body import body_motions
+from clothfem.spec import Scene
 
 COMM = MPI.COMM_WORLD
 CI = Path(__file__).resolve().parents[2] / "demos" / "scenes" / "arm_sleeve_ci.toml"
@@ -29,7 +30,7 @@ SETS = [
 ]
 
 
-def _scenes() -> tuple[dict, dict]:
+def _scenes() -> tuple[Scene, Scene]:
     from scipy.spatial.transform import Rotation
 
     data = scenes.apply_overrides(

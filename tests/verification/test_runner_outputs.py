@@ -383,7 +383,7 @@ def test_torque_table_repeats_the_contact_measure(tmp_path, sets):
     ]
     data = scenes.apply_overrides(scenes.remove_keys(data, UNSET_STATIC), sets)
     scene = scenes.validate(data, base=CI.parent)
-    assert scene["contact"]["aj"] == "beyond_joint" and scene["contact"]["torque_point"] is None
+    assert scene.contact.aj == "beyond_joint" and scene.contact.torque_point is None
     run_scene(scene, base / "run", comm=COMM)
     if COMM.rank == 0:
         rows = _rows(base / "run")
@@ -621,8 +621,8 @@ def test_newmark_free_drape_runs_the_verified_integrator(tmp_path):
     rows = _rows(run_scene(scene, base / "run", comm=COMM))
     model, _ = build_model(scene, COMM)
     records = integrate_implicit(
-        ShellSystem(model, rotary_scale=scene["solver"]["rotary_scale"]),
-        stepping=TimeStepping(dt=0.01, t_end=0.1, dt_min=scene["solver"]["dt_min"]),
+        ShellSystem(model, rotary_scale=scene.solver.rotary_scale),
+        stepping=TimeStepping(dt=0.01, t_end=0.1, dt_min=scene.solver.dt_min),
         scheme=ImplicitScheme.newmark(beta=0.25, gamma=0.5),
         load=lambda t: 1.0,
     )
