@@ -88,10 +88,9 @@ from .self_contact import (
     FabricSurface,
     build_candidates,
     closest_point_triangle,
-    edge_edge_crossings,
+    crossing_groups,
     fabric_surface,
     global_cells,
-    point_triangle_crossings,
     segment_closest,
 )
 
@@ -328,6 +327,7 @@ class SelfBarrier:
         self.filtered = self.rebuilds = 0
         self.wall = 0.0
         self._last = (0, math.inf, 0.0, 0.0)
+        self._at: tuple | None = None  # the last residual's positions, pairs, Hessians, list
 
     # ----------------------------------------------------------------- geometry
     def _gather(self, a: FloatArray) -> FloatArray:
@@ -367,7 +367,8 @@ class SelfBarrier:
         t0 = time.perf_counter()
         xa = self.positions(x)
         bp = self.pairs(xa)
-        e, grad, _, force = pair_energy(xa, bp, params=self.params)
+        e, grad, hess, force = pair_energy(xa, bp, params=self.params)
+        self._at = (xa, bp, hess, self.candidates)  # for the Jacobian at the same positions
         G = np.zeros((self.surface.n_nodes, 3))
         np.add.at(G, bp.idx.ravel(), grad.reshape(-1, 3))
         fa = f.getArray()
@@ -415,8 +416,12 @@ class SelfBarrier:
         blocks of the candidate list; kept while both are), collective."""
         t0 = time.perf_counter()
         xa = self.positions(x)
-        bp = self.pairs(xa)  # (re)builds the list first: the pattern below is its
-        _, _, hess, _ = pair_energy(xa, bp, params=self.params)
+        at = self._at
+        if at is not None and at[3] is self.candidates and np.array_equal(at[0], xa):
+            _, bp, hess, _ = at  # the residual's, at these positions and with this list
+        else:
+            bp = self.pairs(xa)  # (re)builds the list first: the pattern below is its
+            _, _, hess, _ = pair_energy(xa, bp, params=self.params)
         keys, indptr, indices, pos_k, ncol = self._layout(K)
         _, _, kv = K.getValuesCSR()
         data = np.zeros(len(keys))
@@ -452,9 +457,10 @@ class SelfBarrier:
         for _ in range(31):
             xa1 = xa0 + alpha * D
             c = self._list(xa0, xa1, span=alpha * move)
-            ok = c.valid(xa0, xa1) and not (
-                point_triangle_crossings(xa0, xa1, self.surface, c.pt_node, c.pt_tri, eps).any()
-                or edge_edge_crossings(xa0, xa1, self.surface, c.ee, eps).any()
+            # (the explicit fail-safe's check: only pairs whose distance and motion allow a
+            # crossing reach the exact test)
+            ok = c.valid(xa0, xa1) and not any(
+                len(g) for g in crossing_groups(c, self.surface, xa0, xa1, eps)
             )
             # every listed pair keeps at least floor x min(its distance, d)
             ok = ok and all(

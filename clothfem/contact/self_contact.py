@@ -68,6 +68,7 @@ __all__ = [
     "near_pairs",
     "normal_impulses",
     "pair_contacts",
+    "crossing_groups",
     "point_triangle_crossings",
     "project_positions",
     "segment_closest",
@@ -1223,7 +1224,7 @@ def edge_edge_crossings(
     return hit
 
 
-def _crossings(cands: CandidateList, surface, x0, x1, eps) -> tuple[IntArray, IntArray]:
+def crossing_groups(cands: CandidateList, surface, x0, x1, eps) -> tuple[IntArray, IntArray]:
     """Node groups (rows of 4) of the point-triangle and edge-edge pairs that cross. Two
     filters before the cubic (:func:`_relative_motion` bounds the change of a pair's
     distance): the distance at ``x1`` is at least the build distance less the relative
@@ -1476,7 +1477,7 @@ def _failsafe(x0, x, v, m, fx, surface, cands, p: SelfContactParameters):
     for _ in range(p.failsafe_passes):
         cands, _, ok = _list_for(cands, x, x0, surface, p, both=False)
         covered &= ok
-        pt, ee = _crossings(cands, surface, x0, x, eps)
+        pt, ee = crossing_groups(cands, surface, x0, x, eps)
         count = len(pt) + len(ee)
         found = count if found < 0 else found
         if count == 0:
@@ -1485,7 +1486,7 @@ def _failsafe(x0, x, v, m, fx, surface, cands, p: SelfContactParameters):
         x, v = x.copy(), v.copy()
         zone = _impact_zones(x0, x, v, m, fx, links)
     cands, _, ok = _list_for(cands, x, x0, surface, p, both=False)
-    pt, ee = _crossings(cands, surface, x0, x, eps)
+    pt, ee = crossing_groups(cands, surface, x0, x, eps)
     return x, v, found, len(pt) + len(ee), len(zone), cands, covered & ok
 
 
