@@ -71,6 +71,11 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("self_crossings_left", "-", "self-contact: crossing pairs left after the fail-safe"),
     ("self_zone_nodes", "-", "explicit self-contact: nodes moved in impact zones in the row"),
     (
+        "self_friction_work",
+        "J",
+        "newmark self-contact: work of the friction between layers since the start",
+    ),
+    (
         "self_intersections",
         "-",
         "intersecting triangle pairs of the fabric by the independent check, at field frames",

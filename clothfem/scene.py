@@ -734,17 +734,16 @@ SCHEMA: dict[str, Section] = {
                 "fabric-fabric contact; explicit: clothfem.contact.self_contact (proximity "
                 "corrections after FILM, Coulomb friction between layers, a crossing "
                 "fail-safe); newmark: clothfem.contact.self_barrier (a log barrier in the "
-                "Newton system and a crossing step filter, frictionless); false builds "
-                "nothing of it",
+                "Newton system, lagged Coulomb friction between layers and a crossing step "
+                "filter); false builds nothing of it",
                 default=False,
                 when=DYNAMIC,
             ),
             "self_mu": Key(
                 "float",
-                "Coulomb coefficient between fabric layers (default: contact.mu; newmark "
-                "self-contact is frictionless)",
+                "Coulomb coefficient between fabric layers (default: contact.mu)",
                 lo=0.0,
-                when=EXPLICIT,
+                when=DYNAMIC,
             ),
             "self_distance": Key(
                 "float",

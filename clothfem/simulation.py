@@ -525,6 +525,8 @@ class _Newmark:
             self.cut, self.newton = int(data["run_cut"]), int(data["run_newton"])
             if "run_self_max" in data:
                 self.self_max = int(data["run_self_max"])
+            if "run_self_friction" in data:
+                self.sc.friction_work = float(data["run_self_friction"])
         self.timers = dict(self.contact.timers)
         self.last = None
 
@@ -549,6 +551,7 @@ class _Newmark:
         }
         if self.sc is not None:
             out["run_self_max"] = np.array(self.self_max)
+            out["run_self_friction"] = np.array(self.sc.friction_work)
         return out
 
     def body_forces(self) -> BodyForces:
@@ -597,6 +600,7 @@ class _Newmark:
             "self_min_gap": rec.min_distance if math.isfinite(rec.min_distance) else math.nan,
             "self_crossings": 0,  # the step filter admits no crossing iterate
             "self_crossings_left": 0,
+            "self_friction_work": self.sc.friction_work,
             "t_self_contact": rec.wall,
         }
         if frame:
@@ -610,6 +614,7 @@ class _Newmark:
         out: dict[str, Any] = {"cutbacks": self.cut, "newton_iterations": self.newton}
         if self.sc is not None:
             out.update(self_intersections_max=self.self_max, self_crossings_left=0)
+            out["self_friction_work"] = self.sc.friction_work
         return out
 
     def progress(self) -> str:

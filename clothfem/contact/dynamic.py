@@ -230,6 +230,8 @@ class DynamicContact:
         self.view.set_step(xt, 1.0 / (b * dt * dt))
         self.system.set_time_step(dt)
         self._set_poses(self.t + dt)
+        if self.barrier is not None:  # the layer friction's pairs at the step's start
+            self.barrier.begin_step(self.x, dt)
         try:
             rec = self.contact.solve_step(lam)
         except ContactDivergence:
@@ -237,6 +239,8 @@ class DynamicContact:
             raise
         x_new = self.x.duplicate()
         self.system.get_state(x_new)
+        if self.barrier is not None:
+            self.barrier.end_step(x_new)
         a_new = x_new.copy()
         a_new.axpy(-1.0, xt)
         a_new.scale(1.0 / (b * dt * dt))

@@ -67,8 +67,25 @@ the gradient to its owned rows; the Hessian's owned rows go into one AIJ matrix 
 fabric tangent's pattern joined with the 3x3 blocks of every node pair of the candidate list
 (fixed while the list is valid).
 
-Friction between layers is not modelled in this path (the scene key ``contact.self_mu``
-belongs to the explicit integrator).
+**Friction between layers** (``mu`` > 0; IPC's lagged, smoothed Coulomb friction). At the
+start of each step (:meth:`SelfBarrier.begin_step`, positions ``x^n``) the pairs within
+``d`` are frozen with their coefficients ``c``, their normal force ``lambda_k = kappa w_k
+|b'(s_k)|`` [N] and an orthonormal tangent basis ``T_k`` (3 x 2) of the plane normal to
+``r_k(x^n)``. The step's energy gains the dissipation potential
+
+    D(x) = sum_k mu lambda_k F(|u_k|),   u_k = T_k^T sum_j c_j (x_j - x_j^n),
+
+``u_k`` the pair's tangential relative displacement over the step and ``F(y) = y - eps / 3``
+for ``y >= eps``, ``F(y) = y^2 / eps - y^3 / (3 eps^2)`` below, ``eps = slip_velocity dt``:
+the friction force ``mu lambda_k f1(y) u / y`` has Coulomb's magnitude ``mu lambda_k`` once
+the pair slips by more than ``eps`` in the step (relative speed above ``slip_velocity``)
+and falls smoothly to zero with the slip below it (static friction as a very stiff
+tangential spring, ``f1(y) = 2 y / eps - y^2 / eps^2``). Its Hessian
+``mu lambda c c^T (x) T A T^T`` is positive semi-definite: ``A = (I - u u^T / y^2) / y``
+above ``eps``, ``(2 / eps - y / eps^2) I - u u^T / (eps^2 y)`` below (eigenvalues ``f1 / y``
+and ``f1'``, both >= 0). The work of the friction forces over the accepted step, ``sum_k
+mu lambda_k f1(y_k) y_k`` at the converged positions, is what the layer friction
+dissipates (:meth:`SelfBarrier.end_step`).
 """
 
 from __future__ import annotations
@@ -104,6 +121,12 @@ __all__ = [
     "distance_derivatives",
     "vertex_areas",
     "pair_energy",
+    "FrictionPairs",
+    "friction_energy",
+    "friction_pairs",
+    "friction_slip",
+    "friction_work",
+    "tangent_basis",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -121,7 +144,10 @@ class SelfBarrierParameters:
     :func:`clothfem.contact.self_contact.fabric_surface`; skin: candidate-list skin [m]
     (default d); floor: a Newton step keeps every pair within d at least this fraction of
     its distance (0 < floor < 1); max_move: largest node motion of one Newton step, in units
-    of d (> 0); eps: crossing proximity of the step filter, fraction of d (0 < eps < 0.005)."""
+    of d (> 0); eps: crossing proximity of the step filter, fraction of d (0 < eps < 0.005);
+    mu: Coulomb coefficient between layers (>= 0; 0: frictionless); slip_velocity: relative
+    tangential speed [m/s] above which a pair slides with the full Coulomb force (> 0; the
+    static friction's smoothing, module docstring)."""
 
     distance: float
     pressure: float = 1e3
@@ -130,6 +156,8 @@ class SelfBarrierParameters:
     floor: float = 0.1
     max_move: float = 10.0
     eps: float = 1e-3
+    mu: float = 0.0
+    slip_velocity: float = 1e-3
 
     def __post_init__(self) -> None:
         def bad(name, rule):
@@ -151,6 +179,10 @@ class SelfBarrierParameters:
             bad("max_move", "> 0")
         if not 0 < self.eps < 0.005:
             bad("eps", "in (0, 0.005)")
+        if not (math.isfinite(self.mu) and self.mu >= 0):
+            bad("mu", ">= 0")
+        if not (math.isfinite(self.slip_velocity) and self.slip_velocity > 0):
+            bad("slip_velocity", "> 0 m/s")
 
     @property
     def kappa(self) -> float:
@@ -290,6 +322,76 @@ def pair_energy(
     return float(np.sum(k * b)), grad, hess, -k * db
 
 
+class FrictionPairs(NamedTuple):
+    """The pairs of a step's layer friction, frozen at the step's start (module docstring):
+    nodes ``idx`` (M, 4), coefficients ``coef`` (M, 4), ``r0`` (M, 3) [m] = ``sum_j c_j
+    x_j^n``, tangent bases ``basis`` (M, 3, 2) and normal forces ``force`` (M,) [N]."""
+
+    idx: IntArray
+    coef: FloatArray
+    r0: FloatArray
+    basis: FloatArray
+    force: FloatArray
+
+
+def tangent_basis(n: FloatArray) -> FloatArray:
+    """Orthonormal bases (M, 3, 2) of the planes normal to the unit vectors ``n`` (M, 3)."""
+    e = np.eye(3)[np.argmin(np.abs(n), axis=1)]
+    t1 = e - np.sum(e * n, axis=1)[:, None] * n
+    t1 /= np.linalg.norm(t1, axis=1)[:, None]
+    return np.stack([t1, np.cross(n, t1)], axis=2)
+
+
+def friction_pairs(
+    x: FloatArray, pairs: BarrierPairs, *, params: SelfBarrierParameters
+) -> FrictionPairs:
+    """The barrier ``pairs`` at the step's start positions ``x`` (N, 3) [m] frozen for the
+    layer friction: their normal forces ``-kappa w b'(s)`` and tangent planes."""
+    r = np.einsum("mj,mjk->mk", pairs.coef, x[pairs.idx])
+    _, db, _ = barrier(pairs.dist, distance=params.distance)
+    force = -params.kappa * pairs.weight * db
+    return FrictionPairs(pairs.idx, pairs.coef, r, tangent_basis(r / pairs.dist[:, None]), force)
+
+
+def friction_slip(x: FloatArray, fp: FrictionPairs) -> FloatArray:
+    """Tangential relative displacements (M, 2) [m] of the frozen pairs since the step's
+    start, at positions ``x`` (N, 3) [m]."""
+    r = np.einsum("mj,mjk->mk", fp.coef, x[fp.idx])
+    return np.einsum("mkl,mk->ml", fp.basis, r - fp.r0)
+
+
+def friction_work(x: FloatArray, fp: FrictionPairs, *, mu: float, eps: float) -> float:
+    """Work [J] of the layer friction forces over the step to ``x``: ``sum mu lambda f1(y)
+    y`` (module docstring), ``eps`` [m] the slip of full sliding."""
+    y = np.linalg.norm(friction_slip(x, fp), axis=1)
+    f1 = np.where(y >= eps, 1.0, 2.0 * y / eps - y * y / eps**2)
+    return float(np.sum(mu * fp.force * f1 * y))
+
+
+def friction_energy(
+    x: FloatArray, fp: FrictionPairs, *, mu: float, eps: float
+) -> tuple[float, FloatArray, FloatArray]:
+    """The layer friction's dissipation potential D [J] (module docstring), its gradient
+    (M, 12) [N] and Hessian (M, 12, 12) [N/m] per pair at positions ``x`` (N, 3) [m];
+    ``eps`` [m]: the slip in the step above which a pair slides with mu x its normal force."""
+    m = len(fp.force)
+    u = friction_slip(x, fp)
+    y = np.linalg.norm(u, axis=1)
+    slide = y >= eps
+    ys = np.where(y > 0.0, y, 1.0)
+    F = np.where(slide, y - eps / 3.0, y * y / eps - y**3 / (3.0 * eps * eps))
+    f1y = np.where(slide, 1.0 / ys, 2.0 / eps - y / eps**2)  # f1(y) / y
+    cuu = np.where(slide, -1.0 / ys**3, -1.0 / (eps * eps * ys))  # the u u^T coefficient
+    k = mu * fp.force
+    tu = np.einsum("mkl,ml->mk", fp.basis, u)
+    grad = ((k * f1y)[:, None, None] * fp.coef[:, :, None] * tu[:, None, :]).reshape(m, 12)
+    A = f1y[:, None, None] * np.eye(2) + cuu[:, None, None] * np.einsum("mi,mj->mij", u, u)
+    B = np.einsum("mkl,mlp,mnp->mkn", fp.basis, A, fp.basis)  # T A T^T (M, 3, 3)
+    cc = np.einsum("mi,mj->mij", fp.coef, fp.coef)
+    hess = k[:, None, None, None, None] * cc[:, :, None, :, None] * B[:, None, :, None, :]
+    return float(np.sum(k * F)), grad, hess.reshape(m, 12, 12)
+
+
 @dataclass(frozen=True)
 class SelfBarrierRecord:
     """Barrier diagnostics of the last converged step (identical on every rank)."""
@@ -301,6 +403,7 @@ class SelfBarrierRecord:
     filtered: int  # Newton steps the crossing filter shortened since the last record
     rebuilds: int  # candidate-list rebuilds since the last record
     wall: float  # seconds in the barrier since the last record
+    friction_work: float  # work of the layer friction over the steps since the last record [J]
 
 
 class SelfBarrier:
@@ -327,7 +430,11 @@ class SelfBarrier:
         self.filtered = self.rebuilds = 0
         self.wall = 0.0
         self._last = (0, math.inf, 0.0, 0.0)
-        self._at: tuple | None = None  # the last residual's positions, pairs, Hessians, list
+        self._at: tuple | None = None  # the last residual's positions, terms, list, friction
+        self._fric: FrictionPairs | None = None  # this step's frozen friction pairs
+        self._fric_list: CandidateList | None = None  # the list they were taken from
+        self._eps = 0.0  # this step's slip of full sliding [m]
+        self.friction_work = self._work = 0.0  # layer friction's work: total, since record
 
     # ----------------------------------------------------------------- geometry
     def _gather(self, a: FloatArray) -> FloatArray:
@@ -357,38 +464,75 @@ class SelfBarrier:
         )  # fmt: skip
 
     def energy(self, x: PETSc.Vec | None = None) -> float:
-        """Barrier energy [J] at ``x`` (default: the model's state; collective)."""
+        """Barrier energy plus this step's friction potential [J] at ``x`` (default: the
+        model's state; collective)."""
+        return self._terms(self.positions(x))[0]
+
+    # ----------------------------------------------------------------- friction
+    def begin_step(self, x: PETSc.Vec, dt: float) -> None:
+        """Freeze the layer friction's pairs at the step's start ``x`` for a step of ``dt``
+        [s] (collective; nothing without friction)."""
+        if self.params.mu == 0.0:
+            return
+        t0 = time.perf_counter()
         xa = self.positions(x)
-        return pair_energy(xa, self.pairs(xa), params=self.params)[0]
+        self._fric = friction_pairs(xa, self.pairs(xa), params=self.params)
+        self._fric_list = self.candidates
+        self._eps = self.params.slip_velocity * dt
+        self.wall += time.perf_counter() - t0
+
+    def end_step(self, x: PETSc.Vec) -> None:
+        """Add the friction's work over the accepted step ending at ``x`` (collective)."""
+        if self._fric is None:
+            return
+        w = friction_work(self.positions(x), self._fric, mu=self.params.mu, eps=self._eps)
+        self.friction_work += w
+        self._work += w
 
     # ----------------------------------------------------------------- residual, Jacobian
+    def _terms(self, xa: FloatArray) -> tuple:
+        """At positions ``xa``: the energy [J], the node groups (M, 4), gradients (M, 12)
+        and Hessians (M, 12, 12) of the barrier's and the friction's pairs, and the
+        barrier's diagnostics (pairs, smallest distance, energy, force)."""
+        bp = self.pairs(xa)
+        e, grad, hess, force = pair_energy(xa, bp, params=self.params)
+        last = (len(bp.dist), float(np.min(bp.dist, initial=math.inf)), e, float(force.sum()))
+        fp = self._fric
+        if fp is None:
+            return e, bp.idx, grad, hess, last
+        fe, fg, fh = friction_energy(xa, fp, mu=self.params.mu, eps=self._eps)
+        idx = np.concatenate([bp.idx, fp.idx])
+        return e + fe, idx, np.concatenate([grad, fg]), np.concatenate([hess, fh]), last
+
     def add_residual(self, x: PETSc.Vec, f: PETSc.Vec) -> None:
         """f += dE/dx on this rank's u rows (collective)."""
         t0 = time.perf_counter()
         xa = self.positions(x)
-        bp = self.pairs(xa)
-        e, grad, hess, force = pair_energy(xa, bp, params=self.params)
-        self._at = (xa, bp, hess, self.candidates)  # for the Jacobian at the same positions
+        _, idx, grad, hess, self._last = self._terms(xa)
+        self._at = (xa, idx, hess, self.candidates, self._fric)  # for the Jacobian at xa
         G = np.zeros((self.surface.n_nodes, 3))
-        np.add.at(G, bp.idx.ravel(), grad.reshape(-1, 3))
+        np.add.at(G, idx.ravel(), grad.reshape(-1, 3))
         fa = f.getArray()
         fa[: 3 * self.n] += G[self.lo : self.lo + self.n].ravel()
-        self._last = (len(bp.dist), float(np.min(bp.dist, initial=math.inf)), e, float(force.sum()))
         self.wall += time.perf_counter() - t0
 
     def _layout(self, K: PETSc.Mat):
         """The combined pattern of ``K`` and the candidate list's node-pair blocks."""
         kp, ki, _ = K.getValuesCSR()
         c = self.candidates
+        # the friction's pairs are rows of the list they came from; after a rebuild within
+        # the step they may not be in the new one
+        fp = self._fric if self._fric is not None and self._fric_list is not c else None
         if (
             self._pattern is not None
             and self._pattern[0] is c
+            and self._pattern[4] is fp
             and np.array_equal(self._pattern[1], kp)
             and np.array_equal(self._pattern[2], ki)
         ):
             return self._pattern[3]
         nloc, ncol = K.getLocalSize()[0], np.int64(K.getSize()[1])
-        groups = np.concatenate([c.pt_nodes, c.ee_nodes])
+        groups = np.concatenate([c.pt_nodes, c.ee_nodes] + ([fp.idx] if fp is not None else []))
         a = np.repeat(groups, 4, axis=1).ravel()
         b = np.tile(groups, (1, 4)).ravel()
         own = (a >= self.lo) & (a < self.lo + self.n)
@@ -408,7 +552,7 @@ class SelfBarrier:
         C.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATION_ERR, True)
         self._C = C
         lay = (keys, indptr.astype(PETSc.IntType), indices, np.searchsorted(keys, k_keys), ncol)
-        self._pattern = (c, kp.copy(), ki.copy(), lay)
+        self._pattern = (c, kp.copy(), ki.copy(), lay, fp)
         return lay
 
     def jacobian(self, x: PETSc.Vec, K: PETSc.Mat) -> PETSc.Mat:
@@ -417,16 +561,19 @@ class SelfBarrier:
         t0 = time.perf_counter()
         xa = self.positions(x)
         at = self._at
-        if at is not None and at[3] is self.candidates and np.array_equal(at[0], xa):
-            _, bp, hess, _ = at  # the residual's, at these positions and with this list
-        else:
-            bp = self.pairs(xa)  # (re)builds the list first: the pattern below is its
-            _, _, hess, _ = pair_energy(xa, bp, params=self.params)
+        if (
+            at is not None
+            and at[3] is self.candidates
+            and at[4] is self._fric
+            and np.array_equal(at[0], xa)
+        ):
+            _, node, hess, _, _ = at  # the residual's, at these positions and with this list
+        else:  # (re)builds the list first: the pattern below is its
+            _, node, _, hess, _ = self._terms(xa)
         keys, indptr, indices, pos_k, ncol = self._layout(K)
         _, _, kv = K.getValuesCSR()
         data = np.zeros(len(keys))
         data[pos_k] = kv
-        node = bp.idx  # (M, 4)
         r_node = np.repeat(node, 3, axis=1)  # (M, 12) node of each row
         own = (r_node >= self.lo) & (r_node < self.lo + self.n)
         r_loc = 3 * (r_node - self.lo) + np.tile(np.arange(3), 4)
@@ -480,9 +627,12 @@ class SelfBarrier:
     def record(self) -> SelfBarrierRecord:
         """Diagnostics at the last residual evaluation, counters since the last call."""
         pairs, dmin, e, force = self._last
-        rec = SelfBarrierRecord(pairs, dmin, e, force, self.filtered, self.rebuilds, self.wall)
+        rec = SelfBarrierRecord(
+            pairs=pairs, min_distance=dmin, energy=e, force=force, filtered=self.filtered,
+            rebuilds=self.rebuilds, wall=self.wall, friction_work=self._work,
+        )  # fmt: skip
         self.filtered = self.rebuilds = 0
-        self.wall = 0.0
+        self.wall = self._work = 0.0
         return rec
 
     def intersections(self) -> int:
@@ -497,8 +647,10 @@ class SelfBarrier:
     @classmethod
     def from_scene(cls, system, contact: ContactSpec) -> SelfBarrier | None:
         """From a scene's ``contact`` section: None unless ``self_contact`` is true; the
-        activation distance ``self_distance`` [m] (default: the fabric thickness)."""
+        activation distance ``self_distance`` [m] (default: the fabric thickness) and the
+        layer friction ``self_mu`` (default: ``mu``)."""
         if not contact.self_contact:
             return None
         d = contact.self_distance or system.model.thickness
-        return cls(system, params=SelfBarrierParameters(distance=d))
+        mu = contact.mu if contact.self_mu is None else contact.self_mu
+        return cls(system, params=SelfBarrierParameters(distance=d, mu=mu))

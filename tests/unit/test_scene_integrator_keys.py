@@ -50,7 +50,7 @@ DYNAMIC = "integrators 'newmark', 'explicit'"
         ("solver.settle_damping", 10.0, "newmark", "integrator 'explicit'"),
         ("contact.increments", 4, "explicit", "integrator 'static'"),
         ("contact.settle", True, "newmark", "integrator 'static'"),
-        ("contact.self_mu", 0.2, "newmark", "integrator 'explicit'"),
+        ("contact.self_mu", 0.2, "static", DYNAMIC),
         ("contact.kernel", "numpy", "static", "integrator 'explicit'"),
         ("contact.semismooth_passes", 2, "explicit", "integrator 'newmark'"),
         ("output.interval", 0.01, "newmark", "integrator 'explicit'"),

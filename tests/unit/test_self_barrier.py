@@ -1,6 +1,7 @@
 """The fabric-fabric barrier of the implicit path: the barrier function, the distance
 derivatives of every closest-feature case, Taylor tests of the energy's gradient and Hessian
-on a folded sheet (NumPy only: runs unchanged on every rank)."""
+on a folded sheet, and the same for the layer friction's dissipation potential (NumPy only:
+runs unchanged on every rank)."""
 
 import numpy as np
 import pytest
@@ -12,6 +13,10 @@ from clothfem.contact.self_barrier import (
     barrier,
     barrier_pairs,
     distance_derivatives,
+    friction_energy,
+    friction_pairs,
+    friction_slip,
+    friction_work,
     pair_energy,
     vertex_areas,
 )
@@ -116,3 +121,78 @@ def test_energy_gradient_and_hessian_taylor():
     o1, o2 = np.log2(np.array(e1[:-1]) / e1[1:]), np.log2(np.array(e2[:-1]) / e2[1:])
     assert np.all(o1 > 1.8), o1
     assert np.all(o2 > 2.7), o2
+
+
+def frozen_friction():
+    """The folded sheet's barrier pairs frozen for the friction at their positions x0."""
+    x0, surf = folded_sheet()
+    p = SelfBarrierParameters(distance=D, pressure=500.0, mu=0.3)
+    va = vertex_areas(x0, surf)
+    c = build_candidates(x0, surf, distance=D, skin=D)
+    bp = barrier_pairs(x0, surf, c, distance=D, vertex_area=va)
+    return x0, friction_pairs(x0, bp, params=p), p, bp
+
+
+def test_friction_pairs_frame_and_forces():
+    """The frozen tangent bases are orthonormal and normal to each pair's distance vector;
+    the frozen normal forces are the barrier's pair forces -dE/ds."""
+    x0, fp, p, bp = frozen_friction()
+    T = fp.basis
+    np.testing.assert_allclose(
+        np.einsum("mki,mkj->mij", T, T), np.broadcast_to(np.eye(2), (len(T), 2, 2)), atol=1e-14
+    )
+    np.testing.assert_allclose(np.einsum("mk,mkl->ml", fp.r0, T), 0.0, atol=1e-15)
+    np.testing.assert_allclose(fp.force, pair_energy(x0, bp, params=p)[3], rtol=1e-14)
+    assert np.all(fp.force > 0)
+
+
+@pytest.mark.parametrize("regime", ["sliding", "sticking"])
+def test_friction_energy_taylor(regime):
+    """The dissipation potential's gradient and Hessian: remainders of orders 2 and 3 along a
+    random direction from a state moved tangentially since the step's start, every pair
+    slipping more than eps (sliding) or less (sticking)."""
+    x0, fp, p, _ = frozen_friction()
+    slide = np.array([0.4, 0.3, 0.0]) * D
+    eps = 0.01 * D if regime == "sliding" else 10 * D
+    x1 = x0 + slide * (x0[:, 2] > 0.45 * D)[:, None]
+    y = np.linalg.norm(friction_slip(x1, fp), axis=1)
+    moved = y > 0
+    assert moved.sum() > 10
+    assert np.all(y[moved] > eps) if regime == "sliding" else np.all(y < eps)
+    e0, g, H = friction_energy(x1, fp, mu=p.mu, eps=eps)
+    G = np.zeros_like(x1)
+    np.add.at(G, fp.idx.ravel(), g.reshape(-1, 3))
+    v = np.random.default_rng(11).normal(size=x1.shape) * 1e-3 * D
+    vp = v[fp.idx].reshape(len(fp.force), 12)
+    Hv = np.einsum("mi,mij,mj->", vp, H, vp)
+    e1, e2 = [], []
+    for h in 0.5 ** np.arange(1, 6):
+        eh = friction_energy(x1 + h * v, fp, mu=p.mu, eps=eps)[0]
+        e1.append(abs(eh - e0 - h * np.sum(G * v)))
+        e2.append(abs(eh - e0 - h * np.sum(G * v) - 0.5 * h * h * Hv))
+    o1, o2 = np.log2(np.array(e1[:-1]) / e1[1:]), np.log2(np.array(e2[:-1]) / e2[1:])
+    assert np.all(o1 > 1.8), o1
+    assert np.all(o2 > 2.7), o2
+    w = np.linalg.eigvalsh(H)  # positive semi-definite per pair
+    assert w.min() >= -1e-12 * w.max()
+
+
+def test_friction_force_is_coulomb_when_sliding():
+    """A pair slipping by more than eps carries mu x its frozen normal force, opposite to
+    its slip; a pair at rest carries none; the work over the step is mu lambda y."""
+    x0, fp, p, _ = frozen_friction()
+    eps = 1e-6 * D
+    x1 = x0 + np.array([0.5, 0.0, 0.0]) * D * (x0[:, 2] > 0.45 * D)[:, None]
+    _, g, _ = friction_energy(x1, fp, mu=p.mu, eps=eps)
+    g = g.reshape(-1, 4, 3)
+    u = friction_slip(x1, fp)
+    y = np.linalg.norm(u, axis=1)
+    slid = y > eps
+    # the force on the slipping node (coefficient 1) of every node-triangle pair
+    t_dir = np.einsum("mkl,ml->mk", fp.basis, u)[slid] / y[slid, None]
+    np.testing.assert_allclose(
+        -g[slid, 0], -p.mu * fp.force[slid, None] * t_dir, rtol=1e-12, atol=1e-18
+    )
+    np.testing.assert_allclose(g[~slid], 0.0, atol=1e-18)
+    work = friction_work(x1, fp, mu=p.mu, eps=eps)
+    np.testing.assert_allclose(work, np.sum(p.mu * fp.force * y), rtol=1e-12)

@@ -175,8 +175,9 @@ def test_bad_parameters(kw, msg):
 
 def test_scene_keys_build_self_contact_only_when_asked():
     """contact.self_contact defaults to false (SelfContact.from_scene builds nothing); true
-    is allowed with newmark too (then self_mu, explicit only, is refused) and static refuses
-    it; the distance defaults to the thickness, mu to contact.mu."""
+    is allowed with newmark too (with self_mu, the layer friction of both integrators;
+    static refuses both: test_scene_integrator_keys); the distance defaults to the
+    thickness, mu to contact.mu."""
     from pathlib import Path
 
     from clothfem import scene as scenes
@@ -189,8 +190,7 @@ def test_scene_keys_build_self_contact_only_when_asked():
     assert on.self_contact is True and on.self_distance is None and on.self_mu is None
     nm = ["solver.integrator='newmark'", "contact.self_contact=true"]
     assert scenes.load(path, nm + ["contact.self_distance=2e-3"]).contact.self_contact
-    with pytest.raises(scenes.SceneError, match="contact.self_mu"):
-        scenes.load(path, nm + ["contact.self_mu=0.2"])
+    assert scenes.load(path, nm + ["contact.self_mu=0.2"]).contact.self_mu == 0.2
 
 
 @pytest.mark.parametrize("kernel", ["numpy", "auto"])

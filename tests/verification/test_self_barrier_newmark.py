@@ -206,3 +206,65 @@ def test_assembled_barrier_taylor(tmp_path_factory):
     if COMM.rank == 0:
         print(f"assembled Taylor orders: energy {np.round(o1, 2)}, residual {np.round(o2, 2)}")
     assert np.all(o1 > 1.8) and np.all(o2 > 1.8)
+
+
+STIFF = FabricMaterial(E1=1e9, E2=1e9, G12=4e8, rho=500.0)  # the bottom sheet barely sags
+SLIDER = (0.004, 0.026, 0.005, 0.035)  # the top sheet, room to slide along +x
+MU = 0.1
+
+
+def pulled(tmp, g_x: float, mu: float):
+    """The top sheet pressed onto the clamped bottom one by 200 Pa and pulled along +x by a
+    body force rho t g_x per area, for 40 ms of 1 ms Newmark steps: the x-coordinate of the
+    top sheet's centre of mass [m] at every step, the times, and the barrier."""
+    sm = sheets(tmp, top=SLIDER, z0=0.62 * T, n_bottom=4, n_top=3, shift=(0.0013, 0.0007))
+    model = ShellModel(
+        sm, material=STIFF, thickness=T, supports=[Clamp("edges")],
+        loads=[Pressure(-PRESSURE, follower=False), Gravity((g_x, 0.0, 0.0))],
+    )  # fmt: skip
+    system = dy.ShellSystem(model, rotary_scale=100.0)
+    barrier = SelfBarrier(system, params=SelfBarrierParameters(distance=T, mu=mu))
+    dc = DynamicContact(system, far_body, barrier=barrier, beta=0.49, gamma=0.9)
+    top = barrier.X[:, 2] > 0.5 * T
+    xc, t, frames = [], [], []
+
+    def on_step(r):
+        x = barrier.positions()
+        frames.append(x)
+        xc.append(x[top, 0].mean())
+        t.append(r.time)
+
+    dc.run(t_end=0.04, dt=1e-3, on_step=on_step)
+    return np.array(t), np.array(xc) - xc[0], barrier, frames
+
+
+def test_sheet_sliding_over_a_sheet_coulomb(tmp_path_factory):
+    """Pulled by 1.25 x the Coulomb limit, the top sheet slides against Coulomb's force
+    mu p A (A its area, the normal force the pressure's): its mean acceleration over the last
+    20 ms (quadratic fit of its centre's x; the first 20 ms let the layers' normal ringing
+    decay) gives a friction force m (g_x - a) = mu p A within 1 %; every written step is
+    intersection-free; the friction's work is positive."""
+    tmp = COMM.bcast(tmp_path_factory.mktemp("slide") if COMM.rank == 0 else None)
+    limit = MU * PRESSURE / (STIFF.rho * T)  # mu p A / m [m/s^2]
+    t, xc, barrier, frames = pulled(tmp, 1.25 * limit, MU)
+    a = 2.0 * np.polyfit(t[-20:], xc[-20:], 2)[0]
+    friction = 1.25 * limit - a  # per unit mass
+    if COMM.rank == 0:
+        print(f"sliding: friction / (mu p A) = {friction / limit:.5f}, moved {xc[-1]:.4g} m")
+    assert friction == pytest.approx(limit, rel=1e-2)
+    for x in frames[::5] + frames[-1:]:
+        assert check_surface(x, barrier.surface.triangles, radius=4 * T).intersections == 0
+    assert barrier.friction_work > 0
+
+
+def test_sheet_sticking_below_the_limit(tmp_path_factory):
+    """Pulled by half the Coulomb limit the top sheet sticks: its centre creeps by less than
+    the smoothing's slip speed x time (1e-3 m/s x 40 ms = 0.04 mm) where without friction it
+    would move g_x t^2 / 2 = 16 mm."""
+    tmp = COMM.bcast(tmp_path_factory.mktemp("stick") if COMM.rank == 0 else None)
+    limit = MU * PRESSURE / (STIFF.rho * T)
+    t, xc, barrier, _ = pulled(tmp, 0.5 * limit, MU)
+    creep = np.max(np.abs(xc))
+    if COMM.rank == 0:
+        print(f"sticking: creep {creep:.3g} m, free {0.25 * limit * t[-1] ** 2:.3g} m")
+    assert creep < barrier.params.slip_velocity * t[-1]
