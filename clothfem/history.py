@@ -73,7 +73,7 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     (
         "self_friction_work",
         "J",
-        "newmark self-contact: work of the friction between layers since the start",
+        "self-contact: energy dissipated by the friction between layers since the start",
     ),
     (
         "self_intersections",

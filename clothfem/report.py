@@ -325,9 +325,10 @@ def resistance_measures(h: dict[str, np.ndarray], *, joint: str = "joint") -> di
     - ``joints[joint]``: ``work`` [J] of the measured joint against the garment (the last
       ``joint_work``; see :func:`joint_work`) and its part in the flexion phase
       (``work_flexion``);
-    - ``dissipation`` [J]: ``friction`` (contact layers' ``dissipation_total``), ``material``
-      (``dissipation_material``, 0 for the elastic fabric, ``material_note`` says so) and
-      ``total`` = friction + material;
+    - ``dissipation`` [J]: ``friction`` (the body contact's ``dissipation_total``),
+      ``self_friction`` (the friction between fabric layers, ``self_friction_work``; None
+      without self-contact), ``material`` (``dissipation_material``, 0 for the elastic
+      fabric, ``material_note`` says so) and ``total`` = their sum;
     - ``torque``: per phase (``settle``: the body at rest while the loads come on;
       ``flexion``: the motion rows), ``peak`` / ``mean`` of |tau| (``torque_mag``) and of
       -tau . hinge axis (``flex``) over the history rows [N m] (rows of an explicit run are
@@ -356,6 +357,7 @@ def resistance_measures(h: dict[str, np.ndarray], *, joint: str = "joint") -> di
         start = float(w[before[before < motion[0]][-1]]) if motion.size and before.size else 0.0
         work_flex = work - start if motion.size else 0.0
     friction = last("dissipation_total")
+    layers = last("self_friction_work")
     material = last("dissipation_material")
     if material is None and friction is not None:
         material = 0.0  # histories without the column: elastic fabric
@@ -383,9 +385,10 @@ def resistance_measures(h: dict[str, np.ndarray], *, joint: str = "joint") -> di
         "joints": {joint: {"work": work, "work_flexion": work_flex}},
         "dissipation": {
             "friction": friction,
+            "self_friction": layers,
             "material": material,
             "material_note": MATERIAL_NOTE if material == 0.0 else None,
-            "total": None if friction is None else friction + (material or 0.0),
+            "total": None if friction is None else friction + (layers or 0.0) + (material or 0.0),
         },
         "torque": torque,
     }
@@ -501,9 +504,12 @@ def _measures_lines(h: dict[str, np.ndarray], s: dict) -> list[str]:
     d = m["dissipation"]
     if d["total"] is not None:
         note = f": {d['material_note']}" if d["material_note"] else ""
+        layers = (
+            "" if d["self_friction"] is None else f" + between layers {d['self_friction']:.4g} J"
+        )
         lines.append(
             f"- energy dissipated by the clothing: {d['total']:.4g} J = friction "
-            f"{d['friction']:.4g} J + material {d['material']:.4g} J{note}"
+            f"{d['friction']:.4g} J{layers} + material {d['material']:.4g} J{note}"
         )
     for name, e in m["torque"].items():
         if e["peak"] is None:

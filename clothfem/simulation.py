@@ -281,6 +281,8 @@ class _Explicit:
         # fabric self-contact (contact.self_contact): FILM, then the self-contact correction
         self.sc = SelfContact.from_scene(self.system, c, film=self.fc) if scene.body else None
         rank0_print(f"  self-contact: {'built' if self.sc is not None else 'not built'}")
+        if self.sc is not None and data is not None and "run_self_friction" in data:
+            self.sc.friction_loss = float(data["run_self_friction"])
         self.X = self.fc.X if self.fc is not None else None
         self.area = None
         if self.fc is not None:  # reference lumped areas [m^2]
@@ -368,6 +370,7 @@ class _Explicit:
         run["dt"] = self.dt
         if self.sc is not None:  # the run's self-contact totals (summary)
             run.update(run_self_max=self.self_max, run_self_left=self.self_left)
+            run["run_self_friction"] = self.sc.friction_loss
         run.update({f"st_{k}": getattr(self.st, k) for k in StableStep.__dataclass_fields__})
         data = _motion_arrays(self.model, v, a)
         return {**data, **{k: np.array(x) for k, x in run.items()}}
@@ -417,6 +420,7 @@ class _Explicit:
             "self_crossings": rec.crossings,
             "self_crossings_left": rec.crossings_left,
             "self_zone_nodes": rec.zone_nodes,
+            "self_friction_work": self.sc.friction_loss,
             "t_self_contact": rec.wall,
         }
         self.self_left += rec.crossings_left
@@ -433,6 +437,7 @@ class _Explicit:
         if self.sc is not None:
             out.update(self_intersections_max=self.self_max, self_crossings_left=self.self_left)
             out["self_contact_wall"] = self.sc.wall
+            out["self_friction_work"] = self.sc.friction_loss
         return out
 
     def progress(self) -> str:

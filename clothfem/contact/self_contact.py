@@ -1345,7 +1345,9 @@ class SelfContactResult(NamedTuple):
     the last; ``zone_nodes`` nodes moved as impact zones; ``rebuilt`` whether the candidate
     list was rebuilt; ``candidates`` the list (pass it to the next step); ``covered`` False
     when the capped skin could not cover a node's motion in the step (the crossing check
-    then saw only the pairs near the end of the step)."""
+    then saw only the pairs near the end of the step); ``friction_loss`` the kinetic energy
+    the friction impulses took out [J] (what the friction between layers dissipated in the
+    step; >= 0 to the solver's tolerance, the impulses being the maximal-dissipation ones)."""
 
     x: FloatArray
     v: FloatArray
@@ -1362,6 +1364,7 @@ class SelfContactResult(NamedTuple):
     rebuilt: bool
     candidates: CandidateList
     covered: bool
+    friction_loss: float
 
 
 def _list_for(cands, x_now, x_other, surface, p: SelfContactParameters, both=True) -> tuple:
@@ -1420,6 +1423,7 @@ def self_contact_step(
     x, v = xs.copy(), vs.copy()
     lam, jn = np.zeros(len(c.gap)), np.zeros(len(c.gap))
     jt, stick = np.zeros((len(jn), 3)), np.ones(len(jn), dtype=bool)
+    loss = 0.0
     if len(c.gap):
         k = {"passes": p.passes, "kernel": p.kernel}
         x, lam = project_positions(xs, c, inv_m, distance=d, tol=1e-3 * tol, **k)
@@ -1427,13 +1431,14 @@ def self_contact_step(
         if p.mu > 0:
             v1, jt, stick = friction_impulses(v, c, inv_m, jn, mu=p.mu, tol=1e-9 * _speed(vs), **k)
             x += dt * (v1 - v)
+            loss = 0.5 * float(np.sum(m * (_dot(v, v) - _dot(v1, v1))))
             v = v1
     x, v, found, left, zone, cands2, covered2 = _failsafe(x0, x, v, m, fx, surface, cands, p)
     return SelfContactResult(
         x, v, c, lam, jn, jt, stick,
         float(np.max(d - c.gap, initial=0.0)),
         float(np.min(_dot(_relative(x, c.idx, c.coef), c.normal), initial=np.inf)),
-        found, left, zone, rebuilt or cands2 is not cands, cands2, covered and covered2,
+        found, left, zone, rebuilt or cands2 is not cands, cands2, covered and covered2, loss,
     )  # fmt: skip
 
 
@@ -1508,6 +1513,7 @@ class SelfContactRecord:
     rebuilds: int  # candidate-list rebuilds in the window
     uncovered: int  # steps whose motion the capped candidate list did not cover
     wall: float  # seconds spent in the self-contact correction in the window
+    friction_loss: float  # kinetic energy the layer friction took out in the window [J]
 
 
 def global_cells(V) -> tuple[IntArray, int, int]:
@@ -1583,6 +1589,7 @@ class SelfContact:
         self._v_own: FloatArray | None = None
         self.history: list[SelfContactRecord] = []
         self.wall, self.time = 0.0, 0.0
+        self.friction_loss = 0.0  # layer friction's dissipation since the start [J]
         self._window = self._empty_window()
 
     def positions(self) -> FloatArray:
@@ -1641,7 +1648,7 @@ class SelfContact:
     def _empty_window() -> dict:
         return {
             "steps": 0, "contacts": 0, "deficit": 0.0, "gap": np.inf, "jn": 0.0, "found": 0,
-            "left": 0, "zone": 0, "rebuilds": 0, "wall": 0.0, "uncovered": 0,
+            "left": 0, "zone": 0, "rebuilds": 0, "wall": 0.0, "uncovered": 0, "loss": 0.0,
         }  # fmt: skip
 
     def _record(self, res: SelfContactResult, t: float, wall: float) -> None:
@@ -1656,9 +1663,11 @@ class SelfContact:
         w["rebuilds"] += int(res.rebuilt)
         w["uncovered"] += int(not res.covered)
         w["wall"] += wall
+        w["loss"] += res.friction_loss
         w["contacts"] = len(res.jn)
         self.time = t
         self.wall += wall
+        self.friction_loss += res.friction_loss
 
     def collect(self) -> SelfContactRecord:
         """The diagnostics of the steps since the previous call (appended to
@@ -1679,6 +1688,7 @@ class SelfContact:
             rebuilds=w["rebuilds"],
             uncovered=w["uncovered"],
             wall=w["wall"],
+            friction_loss=w["loss"],
         )
         self.history.append(rec)
         self._window = self._empty_window()

@@ -144,6 +144,22 @@ def test_resistance_measures_and_report(tmp_path, capsys):
     assert "torque roughness over 2-20 deg" in text
 
 
+def test_dissipation_counts_the_friction_between_layers(tmp_path):
+    """With self-contact the clothing's dissipation adds the layers' friction
+    (self_friction_work) to the body contact's and the material's."""
+    rows = [
+        dict(stage="motion", time=0.01 * i, angle_deg=1.0 * i, torque_mag=0.1, torque_flex=-0.1,
+             joint_work=0.01 * i, dissipation_total=1e-3 * i, self_friction_work=2e-4 * i,
+             dissipation_material=5e-5 * i)
+        for i in range(1, 6)
+    ]  # fmt: skip
+    d = R.resistance_measures(R.read_history(_history(tmp_path / "run", rows)))["dissipation"]
+    assert d["friction"] == pytest.approx(5e-3) and d["self_friction"] == pytest.approx(1e-3)
+    assert d["total"] == pytest.approx(5e-3 + 1e-3 + 2.5e-4)
+    text = R.report_markdown(tmp_path / "run")
+    assert "= friction 0.005 J + between layers 0.001 J + material 0.00025 J" in text
+
+
 def test_hinge_smooth_start_angle_and_rate():
     """HingeMotion t_ramp: the rate rises as omega (3 x^2 - 2 x^3) over the ramp, the angle
     is its integral (omega t_ramp / 2 behind the constant rate afterwards), angle_max is

@@ -84,7 +84,8 @@ def sliding_step(vt, vn, mu):
 def test_sliding_sheet_coulomb_impulse():
     """Sliding (vt >> mu vn): every pair's tangential impulse is mu x its normal impulse, so
     the top sheet's tangential momentum change is -mu x its normal momentum change (closed
-    form Coulomb), and its normal approach is stopped."""
+    form Coulomb), its normal approach is stopped, and the kinetic energy the friction takes
+    out is the Coulomb force's work |dPt| vt (frictionless: none)."""
     mu = 0.3
     r, m, v, n = sliding_step(1.0, 0.01, mu)
     assert len(r.jn) > n  # node-triangle and edge pairs
@@ -95,6 +96,9 @@ def test_sliding_sheet_coulomb_impulse():
     np.testing.assert_allclose(dP[2], m.sum() * 0.01, rtol=1e-3)  # approach stopped
     np.testing.assert_allclose(-dP[0], mu * dP[2], rtol=1e-12)  # Coulomb: |dPt| = mu dPn
     assert abs(dP[1]) <= 1e-12 * abs(dP[0])
+    # dissipated: Coulomb's force x slip, |dPt| vt, to O(mu vn / vt) = 0.3 %
+    assert r.friction_loss == pytest.approx(mu * dP[2] * 1.0, rel=5e-3)
+    assert sliding_step(1.0, 0.01, 0.0)[0].friction_loss == 0.0
 
 
 def test_sticking_sheet_below_the_limit():
