@@ -18,8 +18,9 @@ a layer and then be pulled back to the wrong side). Measured on the pressed shee
 verification (81 + 49 nodes) at rest: of the 384 node-triangle pairs within d, the
 constraint gradients have rank 284 (smallest singular value 8e-34), so multipliers on all
 of them would make the bordered matrix singular and (b) would need a pair selection the
-barrier does without; the barrier run took 17, 16, 6, 6, 5, 4, 4, 4, 4 Newton iterations
-in its 9 steps (2 cut-backs while the layers met) and balances the load to 0.03 %.
+barrier does without; the barrier run (node-triangle pairs only) took 17, 16, 6, 6, 5, 4,
+4, 4, 4 Newton iterations in its 9 steps (2 cut-backs while the layers met) and balances
+the load to 0.03 %.
 
 **The barrier** (Li et al., *Incremental Potential Contact*, 2020; the C2 clamped log
 barrier on the unsigned distance ``s`` of a pair):
@@ -33,15 +34,24 @@ triangulated surface (:func:`clothfem.contact.self_contact.fabric_surface`) clos
 ``d``, as in IPC's sum over pairs: the distance of a point to a (non-degenerate) triangle
 is C1 in the four nodes' positions, so the energy is C1 with a Hessian that jumps only
 where a pair's closest feature changes (removing the duplicates a node above an edge has in
-the edge's two triangles would make the energy itself jump there). Edge-edge pairs are not
-in the energy: the distance of two segments has a kink where they are parallel (its
-minimiser is not unique), which parallel layers meet everywhere (IPC needs a mollifier
-there); they enter the step filter, so edges cannot pass through each other either.
+the edge's two triangles would make the energy itself jump there).
 Constant weights ``w = A_p / 2`` (``A_p`` the lumped area of the pair's node on the
 reference surface, a third of its triangles'); ``kappa = pressure / (d (1/2 + ln 2))``
 [Pa/m], so that a node of two parallel layers at ``s = d / 2`` carries about ``pressure``
 times its area from its face pair and the opposite node's (the neighbouring triangles' pairs
-add to it: the layers sit a little farther apart than that).
+and the edge pairs add to it: the layers sit a little farther apart than that).
+
+**Edge-edge pairs** (``edges = True``, IPC's mollified edge-edge barrier): the pairs of
+surface edges ``(p0 p1, q0 q1)`` closer than ``d`` add ``kappa w m(c) b(s)`` with ``s``
+the segments' distance (coefficients ``(1 - s, s, -(1 - t), -t)`` of the closest points),
+``w = (A_e0 + A_e1) / 4`` (lumped reference edge areas, a third of each adjacent triangle)
+and the mollifier ``m(c) = (2 - c / eps_x) c / eps_x`` for ``c = |e0 x e1|^2 < eps_x``, 1
+above, ``eps_x = 1e-3 |E0|^2 |E1|^2`` (reference edges): the distance of two segments has
+a kink where they are parallel (the minimiser is not unique), and ``m`` takes the pair's
+energy to zero there as ``c``, so the sum stays C1. Edges closer to parallel than
+``|e0 x e1|^2 < 1e-10 |e0|^2 |e1|^2`` take their closest points at an end (where the
+mollifier has already taken their energy below 2e-7 of a crossing pair's). Edges also enter
+the step filter.
 
 Derivatives of the distance: ``s = min_w |r(x, w)|`` with ``r = sum_j c_j(w) x_j`` (the
 node-triangle coefficients ``(1, -w0, -w1, -w2)`` of
@@ -103,6 +113,7 @@ from ..spec import ContactSpec
 from .self_contact import (
     CandidateList,
     FabricSurface,
+    _ee_distances,
     build_candidates,
     closest_point_triangle,
     crossing_groups,
@@ -121,7 +132,12 @@ __all__ = [
     "distance_derivatives",
     "vertex_areas",
     "pair_energy",
+    "EdgePairs",
     "FrictionPairs",
+    "cross_derivatives",
+    "edge_areas",
+    "edge_energy",
+    "edge_pairs",
     "friction_energy",
     "friction_pairs",
     "friction_slip",
@@ -147,7 +163,8 @@ class SelfBarrierParameters:
     of d (> 0); eps: crossing proximity of the step filter, fraction of d (0 < eps < 0.005);
     mu: Coulomb coefficient between layers (>= 0; 0: frictionless); slip_velocity: relative
     tangential speed [m/s] above which a pair slides with the full Coulomb force (> 0; the
-    static friction's smoothing, module docstring)."""
+    static friction's smoothing, module docstring); edges: edge-edge pairs in the energy
+    (the mollified barrier) besides node-triangle pairs."""
 
     distance: float
     pressure: float = 1e3
@@ -158,6 +175,7 @@ class SelfBarrierParameters:
     eps: float = 1e-3
     mu: float = 0.0
     slip_velocity: float = 1e-3
+    edges: bool = True
 
     def __post_init__(self) -> None:
         def bad(name, rule):
@@ -283,15 +301,18 @@ def _ee_distance(x: FloatArray, c: CandidateList) -> FloatArray:
 
 
 def distance_derivatives(
-    y: FloatArray, coef: FloatArray, free: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Distances (M,) [m], gradients (M, 12) and Hessians (M, 12, 12) [1/m] of the pair
-    distances ``s = |sum_j c_j y_j|`` with respect to the four nodes' positions ``y`` (M, 4,
-    3), the closest-point parameters moving along ``free`` (M, 4, 2) (module docstring)."""
+    y: FloatArray, coef: FloatArray, free: FloatArray, *, hessian: bool = True
+) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+    """Distances (M,) [m], gradients (M, 12) and Hessians (M, 12, 12) [1/m] (None unless
+    ``hessian``) of the pair distances ``s = |sum_j c_j y_j|`` with respect to the four
+    nodes' positions ``y`` (M, 4, 3), the closest-point parameters moving along ``free``
+    (M, 4, 2) (module docstring)."""
     m = len(coef)
     r = np.einsum("mj,mjk->mk", coef, y)
     s = np.linalg.norm(r, axis=1)
     g = (coef[:, :, None] * r[:, None, :]).reshape(m, 12)
+    if not hessian:
+        return s, g / s[:, None], None
     XA = np.einsum("mjk,mjl->mkl", y, free)  # (M, 3, 2)
     W = np.einsum("mkl,mkn->mln", XA, XA)
     unused = ~np.any(free != 0.0, axis=1)  # (M, 2)
@@ -309,17 +330,169 @@ def distance_derivatives(
 
 
 def pair_energy(
-    x: FloatArray, pairs: BarrierPairs, *, params: SelfBarrierParameters
-) -> tuple[float, FloatArray, FloatArray, FloatArray]:
-    """Barrier energy [J], its gradient (M, 12) [N] and Hessian (M, 12, 12) [N/m] per pair,
-    and each pair's force ``-dE/ds`` (M,) [N], at ``x`` (N, 3) [m] for the pairs' closest
-    features."""
-    s, gs, hs = distance_derivatives(x[pairs.idx], pairs.coef, pairs.free)
+    x: FloatArray, pairs: BarrierPairs, *, params: SelfBarrierParameters, hessian: bool = True
+) -> tuple[float, FloatArray, FloatArray | None, FloatArray]:
+    """Barrier energy [J], its gradient (M, 12) [N] and Hessian (M, 12, 12) [N/m] per pair
+    (None unless ``hessian``), and each pair's force ``-dE/ds`` (M,) [N], at ``x`` (N, 3)
+    [m] for the pairs' closest features."""
+    s, gs, hs = distance_derivatives(x[pairs.idx], pairs.coef, pairs.free, hessian=hessian)
     b, db, d2b = barrier(s, distance=params.distance)
     k = params.kappa * pairs.weight
     grad = (k * db)[:, None] * gs
+    if not hessian:
+        return float(np.sum(k * b)), grad, None, -k * db
     hess = (k * d2b)[:, None, None] * np.einsum("mi,mj->mij", gs, gs) + (k * db)[:, None, None] * hs
     return float(np.sum(k * b)), grad, hess, -k * db
+
+
+def edge_areas(x: FloatArray, surface: FabricSurface) -> FloatArray:
+    """Lumped edge areas (E,) [m^2] of the surface's ``edges`` at ``x``: a third of each
+    adjacent triangle's area."""
+    tri = surface.triangles
+    a = 0.5 * np.linalg.norm(
+        np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]]), axis=1
+    )
+    n = np.int64(surface.n_nodes)
+    keys = surface.edges[:, 0].astype(np.int64) * n + surface.edges[:, 1]
+    e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    rows = np.searchsorted(keys, e[:, 0].astype(np.int64) * n + e[:, 1])
+    return np.bincount(rows, weights=np.tile(a / 3.0, 3), minlength=len(keys))
+
+
+class EdgePairs(NamedTuple):
+    """Edge-edge pairs within the activation distance: nodes ``idx`` (M, 4) = (p0, p1, q0,
+    q1), coefficients ``coef`` (M, 4) = ``(1 - s, s, -(1 - t), -t)``, free directions
+    ``free`` (M, 4, 2), distances ``dist`` (M,) [m], area weights ``weight`` (M,) [m^2] and
+    the mollifier thresholds ``eps_x`` (M,) [m^4] (module docstring)."""
+
+    idx: IntArray
+    coef: FloatArray
+    free: FloatArray
+    dist: FloatArray
+    weight: FloatArray
+    eps_x: FloatArray
+
+
+_PARALLEL = 1e-10  # |e0 x e1|^2 / (|e0|^2 |e1|^2) below which two edges count as parallel
+
+
+def _parallel(e0: FloatArray, e1: FloatArray) -> NDArray[np.bool_]:
+    a, e, b = (np.einsum("ij,ij->i", u, w) for u, w in ((e0, e0), (e1, e1), (e0, e1)))
+    return a * e - b * b <= _PARALLEL * a * e
+
+
+def _end_closest(p0, p1, q0, q1) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Closest points of segments through their ends (each end against the other segment,
+    the nearest of the four): parameters ``s``, ``t`` and distances, for parallel edges."""
+    e0, e1 = p1 - p0, q1 - q0
+
+    def on(pt, a, e):  # parameter of the point of segment a + u e closest to pt
+        return np.clip(np.einsum("ij,ij->i", pt - a, e) / np.einsum("ij,ij->i", e, e), 0, 1)
+
+    zero, one = np.zeros(len(p0)), np.ones(len(p0))
+    cand = [(zero, on(p0, q0, e1)), (one, on(p1, q0, e1)), (on(q0, p0, e0), zero)]
+    cand.append((on(q1, p0, e0), one))
+    st = np.array(cand)  # (4, 2, M)
+    r = p0 + st[:, 0, :, None] * e0 - q0 - st[:, 1, :, None] * e1
+    d = np.linalg.norm(r, axis=2)
+    best = np.argmin(d, axis=0)
+    cols = np.arange(len(p0))
+    return st[best, 0, cols], st[best, 1, cols], d[best, cols]
+
+
+def edge_pairs(
+    x: FloatArray,
+    X: FloatArray,
+    candidates: CandidateList,
+    *,
+    distance: float,
+    edge_area: FloatArray,
+) -> EdgePairs:
+    """The edge-edge pairs of the candidate list closer than ``distance`` [m] at ``x`` (N,
+    3), with weights ``(A_e0 + A_e1) / 4`` from the lumped ``edge_area`` and the mollifier
+    threshold ``1e-3 |E0|^2 |E1|^2`` of the reference edges (``X``)."""
+    c = candidates
+    # the compiled distances select the pairs (with a margin), the exact ones decide
+    cand = np.flatnonzero(_ee_distances(x, c.ee_nodes) < distance * (1.0 + 1e-9))
+    y = [x[c.ee_nodes[cand, k]] for k in range(4)]
+    s, t, dist = segment_closest(*y)
+    par = _parallel(y[1] - y[0], y[3] - y[2])
+    if par.any():  # closest points at an end: no near-singular interior minimiser
+        s[par], t[par], dist[par] = _end_closest(*(a[par] for a in y))
+    near = dist < distance
+    cand = cand[near]
+    s, t, g, dist = s[near], t[near], c.ee_nodes[cand], dist[near]
+    coef = np.column_stack([1.0 - s, s, t - 1.0, -t])
+    free = _free_directions(coef, ((1.0, (0, 1)), (-1.0, (2, 3))))
+    weight = 0.25 * edge_area[c.ee[cand]].sum(axis=1)
+    E0, E1 = X[g[:, 1]] - X[g[:, 0]], X[g[:, 3]] - X[g[:, 2]]
+    eps_x = 1e-3 * np.sum(E0 * E0, axis=1) * np.sum(E1 * E1, axis=1)
+    return EdgePairs(g, coef, free, dist, weight, eps_x)
+
+
+def cross_derivatives(
+    y: FloatArray, *, hessian: bool = True
+) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+    """``c = |e0 x e1|^2 = |e0|^2 |e1|^2 - (e0 . e1)^2`` of the edges ``e0 = y1 - y0``, ``e1 =
+    y3 - y2`` of (M, 4, 3) node positions, its gradient (M, 12) and Hessian (M, 12, 12)
+    (None unless ``hessian``)."""
+    m = len(y)
+    e0, e1 = y[:, 1] - y[:, 0], y[:, 3] - y[:, 2]
+    a, b, d = (np.sum(u * w, axis=1) for u, w in ((e0, e0), (e0, e1), (e1, e1)))
+    c = a * d - b * b
+    g0 = 2.0 * (d[:, None] * e0 - b[:, None] * e1)  # dc/de0
+    g1 = 2.0 * (a[:, None] * e1 - b[:, None] * e0)  # dc/de1
+    eye = np.eye(3)
+    h00 = 2.0 * (d[:, None, None] * eye - np.einsum("mi,mj->mij", e1, e1))
+    h11 = 2.0 * (a[:, None, None] * eye - np.einsum("mi,mj->mij", e0, e0))
+    h01 = (
+        4.0 * np.einsum("mi,mj->mij", e0, e1)
+        - 2.0 * np.einsum("mi,mj->mij", e1, e0)
+        - 2.0 * b[:, None, None] * eye
+    )
+    S = np.array([[-1.0, 0.0], [1.0, 0.0], [0.0, -1.0], [0.0, 1.0]])  # node -> edge
+    grad = (S[None, :, 0, None] * g0[:, None] + S[None, :, 1, None] * g1[:, None]).reshape(m, 12)
+    if not hessian:
+        return c, grad, None
+    He = np.empty((m, 2, 2, 3, 3))
+    He[:, 0, 0], He[:, 1, 1], He[:, 0, 1] = h00, h11, h01
+    He[:, 1, 0] = np.transpose(h01, (0, 2, 1))
+    hess = np.empty((m, 4, 3, 4, 3))
+    for i in range(4):  # node i on edge p = i // 2 with sign S[i, p]
+        for j in range(4):
+            hess[:, i, :, j, :] = S[i, i // 2] * S[j, j // 2] * He[:, i // 2, j // 2]
+    return c, grad, hess.reshape(m, 12, 12)
+
+
+def edge_energy(
+    x: FloatArray, pairs: EdgePairs, *, params: SelfBarrierParameters, hessian: bool = True
+) -> tuple[float, FloatArray, FloatArray | None, FloatArray]:
+    """The mollified edge-edge barrier ``kappa w m(c) b(s)`` [J] (module docstring), its
+    gradient (M, 12) [N] and Hessian (M, 12, 12) [N/m] per pair (None unless ``hessian``),
+    and each pair's force ``-dE/ds`` (M,) [N], at ``x`` (N, 3) [m] for the pairs' closest
+    features."""
+    y = x[pairs.idx]
+    s, gs, hs = distance_derivatives(y, pairs.coef, pairs.free, hessian=hessian)
+    b, db, d2b = barrier(s, distance=params.distance)
+    c, gc, hc = cross_derivatives(y, hessian=hessian)
+    ex = pairs.eps_x
+    on = c < ex
+    mol = np.where(on, (2.0 - c / ex) * c / ex, 1.0)
+    dm = np.where(on, 2.0 / ex - 2.0 * c / (ex * ex), 0.0)
+    d2m = np.where(on, -2.0 / (ex * ex), 0.0)
+    k = params.kappa * pairs.weight
+    outer = lambda u, w: np.einsum("mi,mj->mij", u, w)  # noqa: E731
+    grad = (k * dm * b)[:, None] * gc + (k * mol * db)[:, None] * gs
+    if not hessian:
+        return float(np.sum(k * mol * b)), grad, None, -k * mol * db
+    hess = (
+        (k * d2m * b)[:, None, None] * outer(gc, gc)
+        + (k * dm * b)[:, None, None] * hc
+        + (k * dm * db)[:, None, None] * (outer(gc, gs) + outer(gs, gc))
+        + (k * mol * d2b)[:, None, None] * outer(gs, gs)
+        + (k * mol * db)[:, None, None] * hs
+    )
+    return float(np.sum(k * mol * b)), grad, hess, -k * mol * db
 
 
 class FrictionPairs(NamedTuple):
@@ -343,14 +516,14 @@ def tangent_basis(n: FloatArray) -> FloatArray:
 
 
 def friction_pairs(
-    x: FloatArray, pairs: BarrierPairs, *, params: SelfBarrierParameters
+    x: FloatArray, idx: IntArray, coef: FloatArray, force: FloatArray
 ) -> FrictionPairs:
-    """The barrier ``pairs`` at the step's start positions ``x`` (N, 3) [m] frozen for the
-    layer friction: their normal forces ``-kappa w b'(s)`` and tangent planes."""
-    r = np.einsum("mj,mjk->mk", pairs.coef, x[pairs.idx])
-    _, db, _ = barrier(pairs.dist, distance=params.distance)
-    force = -params.kappa * pairs.weight * db
-    return FrictionPairs(pairs.idx, pairs.coef, r, tangent_basis(r / pairs.dist[:, None]), force)
+    """Barrier pairs (nodes ``idx`` (M, 4), coefficients ``coef`` (M, 4), normal forces
+    ``force`` (M,) [N]) at the step's start positions ``x`` (N, 3) [m], frozen for the layer
+    friction with their tangent planes."""
+    r = np.einsum("mj,mjk->mk", coef, x[idx])
+    n = r / np.linalg.norm(r, axis=1)[:, None]
+    return FrictionPairs(idx, coef, r, tangent_basis(n), force)
 
 
 def friction_slip(x: FloatArray, fp: FrictionPairs) -> FloatArray:
@@ -369,11 +542,12 @@ def friction_work(x: FloatArray, fp: FrictionPairs, *, mu: float, eps: float) ->
 
 
 def friction_energy(
-    x: FloatArray, fp: FrictionPairs, *, mu: float, eps: float
-) -> tuple[float, FloatArray, FloatArray]:
+    x: FloatArray, fp: FrictionPairs, *, mu: float, eps: float, hessian: bool = True
+) -> tuple[float, FloatArray, FloatArray | None]:
     """The layer friction's dissipation potential D [J] (module docstring), its gradient
-    (M, 12) [N] and Hessian (M, 12, 12) [N/m] per pair at positions ``x`` (N, 3) [m];
-    ``eps`` [m]: the slip in the step above which a pair slides with mu x its normal force."""
+    (M, 12) [N] and Hessian (M, 12, 12) [N/m] per pair (None unless ``hessian``) at
+    positions ``x`` (N, 3) [m]; ``eps`` [m]: the slip in the step above which a pair slides
+    with mu x its normal force."""
     m = len(fp.force)
     u = friction_slip(x, fp)
     y = np.linalg.norm(u, axis=1)
@@ -385,6 +559,8 @@ def friction_energy(
     k = mu * fp.force
     tu = np.einsum("mkl,ml->mk", fp.basis, u)
     grad = ((k * f1y)[:, None, None] * fp.coef[:, :, None] * tu[:, None, :]).reshape(m, 12)
+    if not hessian:
+        return float(np.sum(k * F)), grad, None
     A = f1y[:, None, None] * np.eye(2) + cuu[:, None, None] * np.einsum("mi,mj->mij", u, u)
     B = np.einsum("mkl,mlp,mnp->mkn", fp.basis, A, fp.basis)  # T A T^T (M, 3, 3)
     cc = np.einsum("mi,mj->mij", fp.coef, fp.coef)
@@ -420,6 +596,7 @@ class SelfBarrier:
         self._counts = np.array(self.comm.allgather(3 * n))
         self.X = self._gather(self.model.x_nodes[:n])
         self.vertex_area = vertex_areas(self.X, self.surface)
+        self.edge_area = edge_areas(self.X, self.surface)
         vec = system.create_vector()
         start = vec.getOwnershipRange()[0]
         vec.destroy()
@@ -430,7 +607,6 @@ class SelfBarrier:
         self.filtered = self.rebuilds = 0
         self.wall = 0.0
         self._last = (0, math.inf, 0.0, 0.0)
-        self._at: tuple | None = None  # the last residual's positions, terms, list, friction
         self._fric: FrictionPairs | None = None  # this step's frozen friction pairs
         self._fric_list: CandidateList | None = None  # the list they were taken from
         self._eps = 0.0  # this step's slip of full sliding [m]
@@ -466,7 +642,7 @@ class SelfBarrier:
     def energy(self, x: PETSc.Vec | None = None) -> float:
         """Barrier energy plus this step's friction potential [J] at ``x`` (default: the
         model's state; collective)."""
-        return self._terms(self.positions(x))[0]
+        return self._terms(self.positions(x), hessian=False)[0]
 
     # ----------------------------------------------------------------- friction
     def begin_step(self, x: PETSc.Vec, dt: float) -> None:
@@ -476,7 +652,8 @@ class SelfBarrier:
             return
         t0 = time.perf_counter()
         xa = self.positions(x)
-        self._fric = friction_pairs(xa, self.pairs(xa), params=self.params)
+        idx, coef, force = self._pair_forces(xa)
+        self._fric = friction_pairs(xa, idx, coef, force)
         self._fric_list = self.candidates
         self._eps = self.params.slip_velocity * dt
         self.wall += time.perf_counter() - t0
@@ -490,28 +667,69 @@ class SelfBarrier:
         self._work += w
 
     # ----------------------------------------------------------------- residual, Jacobian
-    def _terms(self, xa: FloatArray) -> tuple:
-        """At positions ``xa``: the energy [J], the node groups (M, 4), gradients (M, 12)
-        and Hessians (M, 12, 12) of the barrier's and the friction's pairs, and the
-        barrier's diagnostics (pairs, smallest distance, energy, force)."""
+    def _edge_pairs(self, xa: FloatArray) -> EdgePairs | None:
+        """The edge-edge pairs within d at ``xa`` (after :meth:`pairs` made the list valid)."""
+        if not self.params.edges:
+            return None
+        p = self.params
+        return edge_pairs(
+            xa, self.X, self.candidates, distance=p.distance, edge_area=self.edge_area
+        )
+
+    def _pair_forces(self, xa: FloatArray) -> tuple[IntArray, FloatArray, FloatArray]:
+        """Nodes (M, 4), coefficients (M, 4) and forces -dE/ds (M,) [N] of the pairs within
+        d at ``xa``: node-triangle, then edge-edge."""
         bp = self.pairs(xa)
-        e, grad, hess, force = pair_energy(xa, bp, params=self.params)
-        last = (len(bp.dist), float(np.min(bp.dist, initial=math.inf)), e, float(force.sum()))
+        force = pair_energy(xa, bp, params=self.params, hessian=False)[3]
+        ep = self._edge_pairs(xa)
+        if ep is None:
+            return bp.idx, bp.coef, force
+        ef = edge_energy(xa, ep, params=self.params, hessian=False)[3]
+        return (
+            np.concatenate([bp.idx, ep.idx]),
+            np.concatenate([bp.coef, ep.coef]),
+            np.concatenate([force, ef]),
+        )
+
+    def _terms(self, xa: FloatArray, *, hessian: bool) -> tuple:
+        """At positions ``xa``: the energy [J], the node groups (M, 4), gradients (M, 12)
+        and Hessians (M, 12, 12; None unless ``hessian``) of the barrier's pairs
+        (node-triangle, edge-edge) and the friction's, and the barrier's diagnostics (pairs,
+        smallest distance, energy, force)."""
+        p, h = self.params, hessian
+        bp = self.pairs(xa)
+        e, grad, hess, force = pair_energy(xa, bp, params=p, hessian=h)
+        parts, dist = [(bp.idx, grad, hess)], [bp.dist]
+        ep = self._edge_pairs(xa)
+        if ep is not None:
+            ee, eg, eh, ef = edge_energy(xa, ep, params=p, hessian=h)
+            e, force = e + ee, np.concatenate([force, ef])
+            parts.append((ep.idx, eg, eh))
+            dist.append(ep.dist)
+        d = np.concatenate(dist)
+        last = (len(d), float(np.min(d, initial=math.inf)), e, float(force.sum()))
         fp = self._fric
-        if fp is None:
+        if fp is not None:
+            fe, fg, fh = friction_energy(xa, fp, mu=p.mu, eps=self._eps, hessian=h)
+            e += fe
+            parts.append((fp.idx, fg, fh))
+        if len(parts) == 1:
             return e, bp.idx, grad, hess, last
-        fe, fg, fh = friction_energy(xa, fp, mu=self.params.mu, eps=self._eps)
-        idx = np.concatenate([bp.idx, fp.idx])
-        return e + fe, idx, np.concatenate([grad, fg]), np.concatenate([hess, fh]), last
+        idx, g = (np.concatenate(a) for a in list(zip(*parts, strict=True))[:2])
+        return e, idx, g, np.concatenate([q[2] for q in parts]) if h else None, last
+
+    def gradient(self, xa: FloatArray) -> FloatArray:
+        """dE/dx (N, 3) [N] of the barrier and this step's friction at the positions ``xa``
+        (N, 3) [m] of all nodes (the forces on the nodes are its negative)."""
+        _, idx, grad, _, self._last = self._terms(xa, hessian=False)
+        G = np.zeros((self.surface.n_nodes, 3))
+        np.add.at(G, idx.ravel(), grad.reshape(-1, 3))
+        return G
 
     def add_residual(self, x: PETSc.Vec, f: PETSc.Vec) -> None:
         """f += dE/dx on this rank's u rows (collective)."""
         t0 = time.perf_counter()
-        xa = self.positions(x)
-        _, idx, grad, hess, self._last = self._terms(xa)
-        self._at = (xa, idx, hess, self.candidates, self._fric)  # for the Jacobian at xa
-        G = np.zeros((self.surface.n_nodes, 3))
-        np.add.at(G, idx.ravel(), grad.reshape(-1, 3))
+        G = self.gradient(self.positions(x))
         fa = f.getArray()
         fa[: 3 * self.n] += G[self.lo : self.lo + self.n].ravel()
         self.wall += time.perf_counter() - t0
@@ -560,16 +778,7 @@ class SelfBarrier:
         blocks of the candidate list; kept while both are), collective."""
         t0 = time.perf_counter()
         xa = self.positions(x)
-        at = self._at
-        if (
-            at is not None
-            and at[3] is self.candidates
-            and at[4] is self._fric
-            and np.array_equal(at[0], xa)
-        ):
-            _, node, hess, _, _ = at  # the residual's, at these positions and with this list
-        else:  # (re)builds the list first: the pattern below is its
-            _, node, _, hess, _ = self._terms(xa)
+        _, node, _, hess, _ = self._terms(xa, hessian=True)  # (re)builds the list first
         keys, indptr, indices, pos_k, ncol = self._layout(K)
         _, _, kv = K.getValuesCSR()
         data = np.zeros(len(keys))

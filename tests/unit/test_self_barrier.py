@@ -3,6 +3,8 @@ derivatives of every closest-feature case, Taylor tests of the energy's gradient
 on a folded sheet, and the same for the layer friction's dissipation potential (NumPy only:
 runs unchanged on every rank)."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from mpi4py import MPI
@@ -12,7 +14,11 @@ from clothfem.contact.self_barrier import (
     SelfBarrierParameters,
     barrier,
     barrier_pairs,
+    cross_derivatives,
     distance_derivatives,
+    edge_areas,
+    edge_energy,
+    edge_pairs,
     friction_energy,
     friction_pairs,
     friction_slip,
@@ -130,19 +136,19 @@ def frozen_friction():
     va = vertex_areas(x0, surf)
     c = build_candidates(x0, surf, distance=D, skin=D)
     bp = barrier_pairs(x0, surf, c, distance=D, vertex_area=va)
-    return x0, friction_pairs(x0, bp, params=p), p, bp
+    force = pair_energy(x0, bp, params=p)[3]
+    return x0, friction_pairs(x0, bp.idx, bp.coef, force), p, bp
 
 
 def test_friction_pairs_frame_and_forces():
     """The frozen tangent bases are orthonormal and normal to each pair's distance vector;
-    the frozen normal forces are the barrier's pair forces -dE/ds."""
+    the barrier's pair forces -dE/ds they carry are positive."""
     x0, fp, p, bp = frozen_friction()
     T = fp.basis
     np.testing.assert_allclose(
         np.einsum("mki,mkj->mij", T, T), np.broadcast_to(np.eye(2), (len(T), 2, 2)), atol=1e-14
     )
     np.testing.assert_allclose(np.einsum("mk,mkl->ml", fp.r0, T), 0.0, atol=1e-15)
-    np.testing.assert_allclose(fp.force, pair_energy(x0, bp, params=p)[3], rtol=1e-14)
     assert np.all(fp.force > 0)
 
 
@@ -196,3 +202,88 @@ def test_friction_force_is_coulomb_when_sliding():
     np.testing.assert_allclose(g[~slid], 0.0, atol=1e-18)
     work = friction_work(x1, fp, mu=p.mu, eps=eps)
     np.testing.assert_allclose(work, np.sum(p.mu * fp.force * y), rtol=1e-12)
+
+
+def test_cross_product_derivatives_taylor():
+    """c = |e0 x e1|^2 of two random edges: gradient and Hessian against c at perturbed
+    positions (c is quartic: remainders of orders 2 and 3)."""
+    rng = np.random.default_rng(4)
+    y0 = rng.normal(size=(1, 4, 3))
+    c0, g, H = cross_derivatives(y0)
+    e0, e1 = y0[0, 1] - y0[0, 0], y0[0, 3] - y0[0, 2]
+    assert c0[0] == pytest.approx(np.sum(np.cross(e0, e1) ** 2), rel=1e-12)
+    v = rng.normal(size=12)
+    e1s, e2s = [], []
+    for h in 1e-2 * 0.5 ** np.arange(4):
+        ch = cross_derivatives(y0 + h * v.reshape(1, 4, 3))[0][0]
+        e1s.append(abs(ch - c0[0] - h * g[0] @ v))
+        e2s.append(abs(ch - c0[0] - h * g[0] @ v - 0.5 * h * h * v @ H[0] @ v))
+    o1, o2 = np.log2(np.array(e1s[:-1]) / e1s[1:]), np.log2(np.array(e2s[:-1]) / e2s[1:])
+    assert np.all(o1 > 1.8), o1
+    assert np.all(o2 > 2.7), o2
+
+
+def test_edge_energy_gradient_and_hessian_taylor():
+    """The mollified edge-edge barrier of every edge pair of the folded sheet within d
+    (crossing and nearly parallel edges, some mollified), each pair's closest points and
+    mollifier recomputed at every x: gradient and Hessian remainders of orders 2 and 3 along
+    a random direction per pair."""
+    from clothfem.contact.self_barrier import EdgePairs, _free_directions
+    from clothfem.contact.self_contact import segment_closest
+
+    x0, surf = folded_sheet()
+    p = SelfBarrierParameters(distance=D, pressure=500.0)
+    c = build_candidates(x0, surf, distance=D, skin=D)
+    ep = edge_pairs(x0, x0.copy(), c, distance=D, edge_area=edge_areas(x0, surf))
+    cc = cross_derivatives(x0[ep.idx])[0]
+    assert len(ep.dist) > 100 and np.sum(cc < ep.eps_x) > 10
+
+    def energy(y, k):
+        s, t, dist = segment_closest(*(y[:, j] for j in range(4)))
+        coef = np.column_stack([1 - s, s, t - 1, -t])
+        free = _free_directions(coef, ((1.0, (0, 1)), (-1.0, (2, 3))))
+        one = EdgePairs(np.array([[0, 1, 2, 3]]), coef, free, dist, ep.weight[k : k + 1],
+                        ep.eps_x[k : k + 1])  # fmt: skip
+        return edge_energy(y[0], one, params=p)
+
+    rng = np.random.default_rng(2)
+    for k in range(len(ep.dist)):
+        y0 = x0[ep.idx[k]][None]
+        e0, g, H, _ = energy(y0, k)
+        v = rng.normal(size=12) * 1e-3 * D
+        e1, e2 = [], []
+        for h in 0.5 ** np.arange(4):
+            eh = energy(y0 + h * v.reshape(1, 4, 3), k)[0]
+            e1.append(abs(eh - e0 - h * g[0] @ v))
+            e2.append(abs(eh - e0 - h * g[0] @ v - 0.5 * h * h * v @ H[0] @ v))
+        o1, o2 = np.log2(np.array(e1[:-1]) / e1[1:]), np.log2(np.array(e2[:-1]) / e2[1:])
+        assert np.all(o1 > 1.8), (k, o1)
+        assert np.all(o2 > 2.7), (k, o2)
+
+
+def test_edge_energy_vanishes_for_parallel_edges():
+    """Two parallel edges d / 2 apart carry no edge-edge energy or force (the mollifier
+    takes it to zero with |e0 x e1|^2; 1e-7 rad apart, finite and 2e-11 of it); crossing at
+    30 degrees, the full barrier."""
+    p = SelfBarrierParameters(distance=D)
+
+    def pair(angle):
+        q = np.array([0.0, 0.0, 0.5 * D])
+        r = np.array([np.cos(angle), np.sin(angle), 0.0]) * 0.01
+        x = np.array([[-0.01, 0.0, 0.0], [0.01, 0.0, 0.0], q - r, q + r])
+        # a candidate list of the one edge pair (edge_pairs reads ee and ee_nodes)
+        cands = SimpleNamespace(ee=np.array([[0, 1]]), ee_nodes=np.array([[0, 1, 2, 3]]))
+        ep = edge_pairs(x, x, cands, distance=D, edge_area=np.ones(2))
+        assert len(ep.dist) == 1 and ep.dist[0] == pytest.approx(0.5 * D, rel=1e-12)
+        return edge_energy(x, ep, params=p)
+
+    e_par, g_par, _, f_par = pair(0.0)
+    assert e_par == 0.0 and np.all(g_par == 0.0) and f_par[0] == 0.0
+    e_near, g_near, h_near, _ = pair(1e-7)  # closest points at an end: finite, ~0
+    m = 2.0 * np.sin(1e-7) ** 2 / 1e-3  # the mollifier, 2 c / eps_x
+    assert np.all(np.isfinite(h_near)) and e_near == pytest.approx(m * pair(np.pi / 6)[0], rel=1e-6)
+    e30, _, _, f30 = pair(np.pi / 6)
+    b = barrier(np.array([0.5 * D]), distance=D)
+    w = 0.25 * 2.0  # (A_e0 + A_e1) / 4
+    assert e30 == pytest.approx(p.kappa * w * b[0][0], rel=1e-12)
+    assert f30[0] == pytest.approx(-p.kappa * w * b[1][0], rel=1e-12)
