@@ -233,19 +233,18 @@ def barrier_pairs(
 ) -> BarrierPairs:
     """The node-triangle pairs of the candidate list closer than ``distance`` [m] at ``x``
     (N, 3), each with its constant area weight (module docstring). The pairs that can be
-    that close are found first by lower bounds (none when the list's smallest build
-    distance less twice the :func:`~clothfem.contact.self_contact.motion_radius` of the
-    motion since the build is not below ``distance``, else the compiled distances); the
-    closest points of those are then computed as for the whole list (row by row, the same
-    bits)."""
+    that close are found first by lower bounds (the build distance less twice the
+    :func:`~clothfem.contact.self_contact.motion_radius` of the motion since the build,
+    then the compiled distance), with a margin for round-off; the closest points of those
+    are then computed as for the whole list (row by row: the same bits)."""
     c = candidates
     scale = max(1.0, float(np.max(np.abs(x), initial=0.0)))
-    tol = 1e-6 * distance + 1e-12 * scale  # round-off of the bounds (FilterBounds)
-    lb = float(np.min(c.pt_dist, initial=np.inf)) - 2.0 * motion_radius(x - c.x_build)
-    if lb >= distance + tol:
-        rows = np.zeros(0, dtype=np.intp)
-    else:
-        rows = np.flatnonzero(~(_pt_distances(x, c.pt_nodes) >= distance + tol))
+    reach = distance + 1e-6 * distance + 1e-12 * scale  # (round-off: FilterBounds)
+    rows = np.zeros(0, dtype=np.intp)
+    moved = 2.0 * motion_radius(x - c.x_build)
+    if c.min_distance - moved < reach:
+        rows = np.flatnonzero(~(c.pt_dist - moved >= reach))
+        rows = rows[~(_pt_distances(x, c.pt_nodes[rows]) >= reach)]
     if rows.size == 0:
         return BarrierPairs(
             c.pt_nodes[:0], np.zeros((0, 4)), np.zeros((0, 4, 2)), *[np.zeros(0)] * 2

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
@@ -292,6 +293,7 @@ class CandidateList:
             ee_nodes=self.ee_nodes[ee],
         )  # fmt: skip
 
+    @cached_property
     def min_distance(self) -> float:
         """The smallest build distance [m] of a listed pair (inf for none)."""
         return min(
@@ -1288,14 +1290,14 @@ class FilterBounds:
     closer than ``floor`` x min(their distance at ``x0``, ``distance``); only those need
     the exact tests.
 
-    Two levels: all pairs at once (the smallest build distance less twice the
-    :func:`motion_radius` of the displacements since the build and ``alpha`` times twice
-    that of ``D``), then pair by pair (the distance at ``x0`` by the compiled loop less
-    ``alpha`` times the pair's relative motion over ``D``, :func:`_relative_motion`). A
-    pair's distance changes by at most its relative motion, so both bound the exact
-    distance anywhere on the path; ``tol`` (1e-6 ``distance`` plus 1e-12 of the largest
-    coordinate) keeps them bounds under round-off, so a pair they clear passes the exact
-    tests too."""
+    A pair's distance changes by at most its nodes' relative motion. Three levels, each on
+    what the one before leaves: all pairs at once (the smallest build distance less twice
+    the :func:`motion_radius` of the displacements since the build and ``alpha`` times
+    twice that of ``D``), each pair's build distance less the same, then each pair's
+    distance at ``x0`` (compiled loop) less ``alpha`` times its relative motion over ``D``
+    (:func:`_relative_motion`). All bound the exact distance anywhere on the path; ``tol``
+    (1e-6 ``distance`` plus 1e-12 of the largest coordinate) keeps them bounds under
+    round-off, so a pair they clear passes the exact tests too."""
 
     def __init__(
         self, cands: CandidateList, x0: FloatArray, D: FloatArray, *,
@@ -1305,32 +1307,38 @@ class FilterBounds:
         self.distance, self.floor, self.eps = distance, floor, eps
         scale = max(1.0, float(np.max(np.abs(x0), initial=0.0)))
         self.tol = 1e-6 * distance + 1e-12 * scale
-        self.lb0 = cands.min_distance() - 2.0 * motion_radius(x0 - cands.x_build)
-        self.mD = 2.0 * motion_radius(D)
-        self._pairs: tuple | None = None
+        self.r0 = 2.0 * motion_radius(x0 - cands.x_build)
+        self.rD = 2.0 * motion_radius(D)
+        self._pairs: list | None = None
+        self._alpha = 0.0  # the largest alpha the pair bounds hold the rows of
+
+    def _clear(self, lb: FloatArray | float, floor: FloatArray | float):
+        return (lb > self.eps + self.tol) & (lb >= floor + self.tol)
 
     def all_clear(self, alpha: float) -> bool:
         """Whether no listed pair can come within ``eps`` on the path of ``alpha D`` or end
         below its floor (the bound of all pairs at once)."""
-        lb = self.lb0 - alpha * self.mD
-        return bool(lb > self.eps + self.tol and lb >= self.floor * self.distance + self.tol)
+        lb = self.cands.min_distance - self.r0 - alpha * self.rD
+        return bool(self._clear(lb, self.floor * self.distance))
 
     def rows(self, alpha: float) -> tuple[tuple[IntArray, IntArray], tuple[IntArray, IntArray]]:
         """The point-triangle and edge-edge rows of the list the pair bounds do not clear
         for ``alpha``: those that can come within ``eps`` on the path, those that can end
         below their floor."""
-        if self._pairs is None:
-            c, x0, D = self.cands, self.x0, self.D
-            self._pairs = (
-                (_pt_distances(x0, c.pt_nodes), _relative_motion(D, c.pt_nodes, 1)),
-                (_ee_distances(x0, c.ee_nodes), _relative_motion(D, c.ee_nodes, 2)),
-            )
+        c, x0, D = self.cands, self.x0, self.D
+        if self._pairs is None or alpha > self._alpha:
+            self._pairs, self._alpha = [], alpha
+            for dist, g, split in ((c.pt_dist, c.pt_nodes, 1), (c.ee_dist, c.ee_nodes, 2)):
+                lb = dist - (self.r0 + alpha * self.rD)
+                s = np.flatnonzero(~self._clear(lb, self.floor * self.distance))
+                gs = g[s]
+                d0 = _pt_distances(x0, gs) if split == 1 else _ee_distances(x0, gs)
+                self._pairs.append((s, d0, _relative_motion(D, gs, split)))
         cross, low = [], []
-        for d0, rm in self._pairs:
+        for s, d0, rm in self._pairs:
             lb = d0 - alpha * rm
-            cross.append(np.flatnonzero(~(lb > self.eps + self.tol)))
-            floor = self.floor * np.minimum(d0, self.distance) + self.tol
-            low.append(np.flatnonzero(~(lb >= floor)))
+            cross.append(s[~(lb > self.eps + self.tol)])
+            low.append(s[~(lb >= self.floor * np.minimum(d0, self.distance) + self.tol)])
         return (cross[0], cross[1]), (low[0], low[1])
 
 
