@@ -456,11 +456,19 @@ class SelfBarrier:
         indices = (keys % ncol).astype(PETSc.IntType)
         if self._C is not None:
             self._C.destroy()
-        C = PETSc.Mat().createAIJ(size=K.getSizes(), comm=K.getComm())
-        C.setPreallocationCSR((indptr.astype(PETSc.IntType), indices))
+        indptr = indptr.astype(PETSc.IntType)
+        self._C_data = None
+        if self.comm.size == 1:  # SeqAIJ on our arrays: jacobian() writes the values in place
+            self._C_data = np.zeros(len(keys))
+            C = PETSc.Mat().createAIJWithArrays(
+                K.getSizes(), (indptr, indices, self._C_data), comm=K.getComm()
+            )
+        else:  # MPIAIJ copies into its diagonal / off-diagonal parts: jacobian() sets rows
+            C = PETSc.Mat().createAIJ(size=K.getSizes(), comm=K.getComm())
+            C.setPreallocationCSR((indptr, indices))
         C.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATION_ERR, True)
         self._C = C
-        lay = (keys, indptr.astype(PETSc.IntType), indices, np.searchsorted(keys, k_keys), ncol)
+        lay = (keys, indptr, indices, np.searchsorted(keys, k_keys), ncol)
         self._pattern = (c, kp.copy(), ki.copy(), lay)
         return lay
 
@@ -477,7 +485,8 @@ class SelfBarrier:
             _, _, hess, _ = pair_energy(xa, bp, params=self.params)
         keys, indptr, indices, pos_k, ncol = self._layout(K)
         _, _, kv = K.getValuesCSR()
-        data = np.zeros(len(keys))
+        data = np.zeros(len(keys)) if self._C_data is None else self._C_data
+        data[:] = 0.0
         data[pos_k] = kv
         node = bp.idx  # (M, 4)
         r_node = np.repeat(node, 3, axis=1)  # (M, 12) node of each row
@@ -488,8 +497,9 @@ class SelfBarrier:
         sel = np.broadcast_to(own[:, :, None], ek.shape)
         np.add.at(data, np.searchsorted(keys, ek[sel]), hess[sel])
         C = self._C
-        C.setValuesCSR(indptr, indices, data)
-        C.assemble()
+        if self._C_data is None:
+            C.setValuesCSR(indptr, indices, data)
+        C.assemble()  # also marks the new values
         self.wall += time.perf_counter() - t0
         return C
 
