@@ -20,8 +20,8 @@ split into gather (``_gather``), list validity (``CandidateList.valid``), the fi
 distance bounds (``FilterBounds``, where it exists), its crossing check
 (``crossing_groups``), its exact distance checks (``_pt_distance``, ``_ee_distance``),
 pairs + energy (``pairs`` less the list validity inside it, ``pair_energy``), the
-Jacobian (``jacobian`` less the above: mostly the copy of the shell's matrix into the
-barrier's) and the rest of ``add_residual`` and ``max_step`` (exclusive times of the
+Jacobian (``jacobian`` less the above: the shell's matrix and the pairs' Hessians into
+the barrier's matrix) and the rest of ``add_residual`` and ``max_step`` (exclusive times of the
 wrapped functions; the wrappers' own cost is in each column, the uninstrumented total
 beside them).
 
