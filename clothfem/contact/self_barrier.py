@@ -113,12 +113,15 @@ from ..spec import ContactSpec
 from .self_contact import (
     CandidateList,
     FabricSurface,
+    FilterBounds,
     _ee_distances,
+    _pt_distances,
     build_candidates,
     closest_point_triangle,
     crossing_groups,
     fabric_surface,
     global_cells,
+    motion_radius,
     segment_closest,
 )
 
@@ -279,25 +282,45 @@ def barrier_pairs(
     vertex_area: FloatArray,
 ) -> BarrierPairs:
     """The node-triangle pairs of the candidate list closer than ``distance`` [m] at ``x``
-    (N, 3), each with its constant area weight (module docstring)."""
+    (N, 3), each with its constant area weight (module docstring). The pairs that can be
+    that close are found first by lower bounds (the build distance less twice the
+    :func:`~clothfem.contact.self_contact.motion_radius` of the motion since the build,
+    then the compiled distance), with a margin for round-off; the closest points of those
+    are then computed as for the whole list (row by row: the same bits)."""
     c = candidates
-    p, a, b, cc = (x[c.pt_nodes[:, k]] for k in range(4))
+    scale = max(1.0, float(np.max(np.abs(x), initial=0.0)))
+    reach = distance + 1e-6 * distance + 1e-12 * scale  # (round-off: FilterBounds)
+    rows = np.zeros(0, dtype=np.intp)
+    moved = 2.0 * motion_radius(x - c.x_build)
+    if c.min_distance - moved < reach:
+        rows = np.flatnonzero(~(c.pt_dist - moved >= reach))
+        rows = rows[~(_pt_distances(x, c.pt_nodes[rows]) >= reach)]
+    if rows.size == 0:
+        return BarrierPairs(
+            c.pt_nodes[:0], np.zeros((0, 4)), np.zeros((0, 4, 2)), *[np.zeros(0)] * 2
+        )
+    g = c.pt_nodes[rows]
+    p, a, b, cc = (x[g[:, k]] for k in range(4))
     q, w = closest_point_triangle(p, a, b, cc)
     dist = np.linalg.norm(p - q, axis=1)
     near = dist < distance
     coef = np.column_stack([np.ones(int(near.sum())), -w[near]])
     free = _free_directions(coef, ((1.0, (0,)), (-1.0, (1, 2, 3))))
-    weight = 0.5 * vertex_area[c.pt_node[near]]
-    return BarrierPairs(c.pt_nodes[near], coef, free, dist[near], weight)
+    weight = 0.5 * vertex_area[c.pt_node[rows[near]]]
+    return BarrierPairs(g[near], coef, free, dist[near], weight)
 
 
-def _pt_distance(x: FloatArray, c: CandidateList) -> FloatArray:
-    p, a, b, cc = (x[c.pt_nodes[:, k]] for k in range(4))
+def _pt_distance(x: FloatArray, c: CandidateList, rows: IntArray | None = None) -> FloatArray:
+    """Distances (M,) [m] of the list's point-triangle pairs (``rows`` of them) at ``x``."""
+    g = c.pt_nodes if rows is None else c.pt_nodes[rows]
+    p, a, b, cc = (x[g[:, k]] for k in range(4))
     return np.linalg.norm(p - closest_point_triangle(p, a, b, cc)[0], axis=1)
 
 
-def _ee_distance(x: FloatArray, c: CandidateList) -> FloatArray:
-    return segment_closest(*(x[c.ee_nodes[:, k]] for k in range(4)))[2]
+def _ee_distance(x: FloatArray, c: CandidateList, rows: IntArray | None = None) -> FloatArray:
+    """Distances (M,) [m] of the list's edge pairs (``rows`` of them) at ``x``."""
+    g = c.ee_nodes if rows is None else c.ee_nodes[rows]
+    return segment_closest(*(x[g[:, k]] for k in range(4)))[2]
 
 
 def distance_derivatives(
@@ -613,24 +636,54 @@ class SelfBarrier:
         self.friction_work = self._work = 0.0  # layer friction's work: total, since record
 
     # ----------------------------------------------------------------- geometry
+    # the last positions gathered (this rank's u rows, all positions) and the last ones the
+    # candidate list was found valid at (the list, the positions)
+    _gathered: tuple | None = None
+    _valid_at: tuple | None = None
+
     def _gather(self, a: FloatArray) -> FloatArray:
         out = np.empty(int(self._counts.sum()))
         self.comm.Allgatherv(np.ascontiguousarray(a, dtype=float).ravel(), [out, self._counts])
         return out.reshape(-1, 3)
 
-    def positions(self, x: PETSc.Vec | None = None) -> FloatArray:
-        """Positions (N, 3) [m] of all nodes in global numbering at ``x`` (default: the
-        model's state), on every rank (collective)."""
-        u = self.model.u.x.array if x is None else x.getArray(readonly=True)
-        return self.X + self._gather(u[: 3 * self.n])
+    def positions(self, x: PETSc.Vec | FloatArray | None = None) -> FloatArray:
+        """Positions (N, 3) [m] of all nodes in global numbering at ``x`` (a vector or this
+        rank's array of (u, theta); default: the model's state), on every rank (collective).
+        The same u rows on every rank as at the previous call are not gathered again."""
+        if x is None:
+            u = self.model.u.x.array[: 3 * self.n]
+        elif isinstance(x, np.ndarray):
+            u = x[: 3 * self.n]
+        else:
+            u = x.getArray(readonly=True)[: 3 * self.n]
+        last = self._gathered
+        same = last is not None and np.array_equal(last[0], u)
+        if self.comm.size > 1:  # collective: every rank gathers or none
+            same = self.comm.allreduce(int(not same)) == 0
+        if same:
+            return last[1].copy()
+        xa = self.X + self._gather(u)
+        self._gathered = (u.copy(), xa)
+        return xa.copy()
 
     def _list(self, *xs: FloatArray, span: float = 0.0) -> CandidateList:
         p = self.params
-        if self.candidates is None or not self.candidates.valid(*xs):
+        c = self.candidates
+        if c is None or not all(self._valid(c, x) for x in xs):
             skin = max(p.skin_length, 8.0 * span)
             self.candidates = build_candidates(xs[0], self.surface, distance=p.distance, skin=skin)
             self.rebuilds += 1
         return self.candidates
+
+    def _valid(self, c: CandidateList, x: FloatArray) -> bool:
+        """``c.valid(x)``, known without the check for the last positions found valid."""
+        last = self._valid_at
+        if last is not None and last[0] is c and np.array_equal(last[1], x):
+            return True
+        ok = c.valid(x)
+        if ok:
+            self._valid_at = (c, x.copy())
+        return ok
 
     def pairs(self, xa: FloatArray) -> BarrierPairs:
         """The pairs within the activation distance at positions ``xa`` (N, 3) [m]."""
@@ -765,11 +818,19 @@ class SelfBarrier:
         indices = (keys % ncol).astype(PETSc.IntType)
         if self._C is not None:
             self._C.destroy()
-        C = PETSc.Mat().createAIJ(size=K.getSizes(), comm=K.getComm())
-        C.setPreallocationCSR((indptr.astype(PETSc.IntType), indices))
+        indptr = indptr.astype(PETSc.IntType)
+        self._C_data = None
+        if self.comm.size == 1:  # SeqAIJ on our arrays: jacobian() writes the values in place
+            self._C_data = np.zeros(len(keys))
+            C = PETSc.Mat().createAIJWithArrays(
+                K.getSizes(), (indptr, indices, self._C_data), comm=K.getComm()
+            )
+        else:  # MPIAIJ copies into its diagonal / off-diagonal parts: jacobian() sets rows
+            C = PETSc.Mat().createAIJ(size=K.getSizes(), comm=K.getComm())
+            C.setPreallocationCSR((indptr, indices))
         C.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATION_ERR, True)
         self._C = C
-        lay = (keys, indptr.astype(PETSc.IntType), indices, np.searchsorted(keys, k_keys), ncol)
+        lay = (keys, indptr, indices, np.searchsorted(keys, k_keys), ncol)
         self._pattern = (c, kp.copy(), ki.copy(), lay, fp)
         return lay
 
@@ -781,7 +842,8 @@ class SelfBarrier:
         _, node, _, hess, _ = self._terms(xa, hessian=True)  # (re)builds the list first
         keys, indptr, indices, pos_k, ncol = self._layout(K)
         _, _, kv = K.getValuesCSR()
-        data = np.zeros(len(keys))
+        data = np.zeros(len(keys)) if self._C_data is None else self._C_data
+        data[:] = 0.0
         data[pos_k] = kv
         r_node = np.repeat(node, 3, axis=1)  # (M, 12) node of each row
         own = (r_node >= self.lo) & (r_node < self.lo + self.n)
@@ -791,8 +853,9 @@ class SelfBarrier:
         sel = np.broadcast_to(own[:, :, None], ek.shape)
         np.add.at(data, np.searchsorted(keys, ek[sel]), hess[sel])
         C = self._C
-        C.setValuesCSR(indptr, indices, data)
-        C.assemble()
+        if self._C_data is None:
+            C.setValuesCSR(indptr, indices, data)
+        C.assemble()  # also marks the new values
         self.wall += time.perf_counter() - t0
         return C
 
@@ -801,28 +864,43 @@ class SelfBarrier:
         """The largest fraction ``alpha`` in 1, 1/2, 1/4, ... of the Newton step ``dx`` from
         ``x0`` (this rank's (u, theta) arrays) with no crossing along the path and every
         pair within d at least ``floor`` times its distance at the end (0 if none down to
-        2^-30; collective, the same value on every rank)."""
+        2^-30; collective, the same value on every rank).
+
+        Only the pairs whose distance bounds
+        (:class:`~clothfem.contact.self_contact.FilterBounds`) leave a crossing or the
+        floor possible reach the exact tests: the others pass them anyway."""
         t0 = time.perf_counter()
         p, n = self.params, self.n
-        xa0 = self.X + self._gather(x0[: 3 * n])
+        xa0 = self.positions(x0)
         D = self._gather(dx[: 3 * n])
         move = float(np.max(np.linalg.norm(D, axis=1), initial=0.0))
         alpha = min(1.0, p.max_move * p.distance / move) if move > 0 else 1.0
         alpha = 2.0 ** math.floor(math.log2(alpha)) if alpha < 1.0 else 1.0
         eps = p.eps * p.distance
+        bounds: FilterBounds | None = None
         for _ in range(31):
             xa1 = xa0 + alpha * D
+            c0 = self.candidates
             c = self._list(xa0, xa1, span=alpha * move)
-            # (the explicit fail-safe's check: only pairs whose distance and motion allow a
-            # crossing reach the exact test)
-            ok = c.valid(xa0, xa1) and not any(
-                len(g) for g in crossing_groups(c, self.surface, xa0, xa1, eps)
-            )
-            # every listed pair keeps at least floor x min(its distance, d)
-            ok = ok and all(
-                bool(np.all(f(xa1, c) >= p.floor * np.minimum(f(xa0, c), p.distance)))
-                for f in (_pt_distance, _ee_distance)
-            )
+            ok = c is c0 or c.valid(xa0, xa1)  # a list kept is valid at both
+            if ok:
+                if bounds is None or bounds.cands is not c:
+                    bounds = FilterBounds(c, xa0, D, distance=p.distance, floor=p.floor, eps=eps)
+                if not bounds.all_clear(alpha):
+                    (c_pt, c_ee), (f_pt, f_ee) = bounds.rows(alpha)
+                    # the explicit fail-safe's check on the pairs that can cross
+                    ok = not (len(c_pt) or len(c_ee)) or not any(
+                        len(g)
+                        for g in crossing_groups(c.subset(c_pt, c_ee), self.surface, xa0, xa1, eps)
+                    )
+                    # every listed pair keeps at least floor x min(its distance, d)
+                    ok = ok and all(
+                        len(r) == 0
+                        or bool(
+                            np.all(f(xa1, c, r) >= p.floor * np.minimum(f(xa0, c, r), p.distance))
+                        )
+                        for f, r in ((_pt_distance, f_pt), (_ee_distance, f_ee))
+                    )
             if ok:
                 break
             alpha *= 0.5

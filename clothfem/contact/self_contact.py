@@ -37,7 +37,8 @@ dv_t``), so sticking layers do not creep.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
@@ -51,6 +52,7 @@ from ..spec import ContactSpec
 __all__ = [
     "CandidateList",
     "FabricSurface",
+    "FilterBounds",
     "PairContacts",
     "SelfContact",
     "SelfContactParameters",
@@ -64,6 +66,7 @@ __all__ = [
     "fabric_surface",
     "global_cells",
     "mesh_nodes",
+    "motion_radius",
     "friction_impulses",
     "near_pairs",
     "normal_impulses",
@@ -214,7 +217,9 @@ def segment_distance(p1: FloatArray, p2: FloatArray, q1: FloatArray, q2: FloatAr
 def _pt_distances(x: FloatArray, idx: IntArray) -> FloatArray:
     """Distances (M,) [m] of node ``idx[:, 0]`` to triangle ``idx[:, 1:]`` (numba loop when
     numba imports, else :func:`closest_point_triangle`)."""
-    if len(idx) and _numba_kernels():
+    if len(idx) == 0:
+        return np.zeros(0)
+    if _numba_kernels():
         out = np.empty(len(idx))
         _numba_kernels()[4](x, idx.astype(np.int64), out)
         return out
@@ -225,7 +230,9 @@ def _pt_distances(x: FloatArray, idx: IntArray) -> FloatArray:
 def _ee_distances(x: FloatArray, idx: IntArray) -> FloatArray:
     """Distances (M,) [m] of segments ``idx[:, :2]`` and ``idx[:, 2:]`` (numba loop when
     numba imports, else :func:`segment_distance`)."""
-    if len(idx) and _numba_kernels():
+    if len(idx) == 0:
+        return np.zeros(0)
+    if _numba_kernels():
         out = np.empty(len(idx))
         _numba_kernels()[5](x, idx.astype(np.int64), out)
         return out
@@ -276,6 +283,23 @@ class CandidateList:
         bounding box: a rigid translation of everything costs nothing). Rigid motion of a
         region costs nothing but the rotation across a few tiles."""
         return all(self.tiles.spread(x - self.x_build) <= self.skin for x in xs)
+
+    def subset(self, pt: IntArray, ee: IntArray) -> CandidateList:
+        """The list of the point-triangle pairs ``pt`` and the edge pairs ``ee`` (rows, in
+        order) of this one, with its build positions and tiles."""
+        return replace(
+            self, pt_node=self.pt_node[pt], pt_tri=self.pt_tri[pt], pt_dist=self.pt_dist[pt],
+            ee=self.ee[ee], ee_dist=self.ee_dist[ee], pt_nodes=self.pt_nodes[pt],
+            ee_nodes=self.ee_nodes[ee],
+        )  # fmt: skip
+
+    @cached_property
+    def min_distance(self) -> float:
+        """The smallest build distance [m] of a listed pair (inf for none)."""
+        return min(
+            float(np.min(self.pt_dist, initial=np.inf)),
+            float(np.min(self.ee_dist, initial=np.inf)),
+        )
 
 
 class Tiles(NamedTuple):
@@ -342,6 +366,16 @@ def _tiles(x: FloatArray, *, longest: float, distance: float, skin: float) -> Ti
     starts = np.flatnonzero(np.r_[True, np.diff(tile[order]) != 0])
     far = 0.5 * (reach - longest - distance)
     return Tiles(size, tile.astype(np.int64), order, starts, p[p[:, 0] <= p[:, 1]], far)
+
+
+def motion_radius(D: FloatArray) -> float:
+    """``max_i |D_i - c|`` [m] over the displacements ``D`` (N, 3), ``c`` the centre of their
+    bounding box: two nodes' displacements differ by at most twice this, so no pair's
+    distance changes by more (a rigid translation costs nothing)."""
+    if len(D) == 0:
+        return 0.0
+    Dc = D - 0.5 * (D.max(axis=0) + D.min(axis=0))
+    return float(np.sqrt(np.max(np.einsum("ij,ij->i", Dc, Dc))))
 
 
 def _moved(x: FloatArray, x_ref: FloatArray) -> FloatArray:
@@ -1246,6 +1280,66 @@ def crossing_groups(cands: CandidateList, surface, x0, x1, eps) -> tuple[IntArra
     h_pt = point_triangle_crossings(x0, x1, surface, cands.pt_node[s_pt], cands.pt_tri[s_pt], eps)
     h_ee = edge_edge_crossings(x0, x1, surface, cands.ee[s_ee], eps)
     return cands.pt_nodes[s_pt[h_pt]], cands.ee_nodes[s_ee[h_ee]]
+
+
+class FilterBounds:
+    """Lower bounds on the listed pairs' distances along the steps ``alpha D`` from ``x0``
+    (both (N, 3) [m]) for the step filter of the implicit barrier
+    (:meth:`clothfem.contact.self_barrier.SelfBarrier.max_step`): which pairs of the list
+    ``cands`` can come within ``eps`` [m] of each other on the path, and which can end
+    closer than ``floor`` x min(their distance at ``x0``, ``distance``); only those need
+    the exact tests.
+
+    A pair's distance changes by at most its nodes' relative motion. Three levels, each on
+    what the one before leaves: all pairs at once (the smallest build distance less twice
+    the :func:`motion_radius` of the displacements since the build and ``alpha`` times
+    twice that of ``D``), each pair's build distance less the same, then each pair's
+    distance at ``x0`` (compiled loop) less ``alpha`` times its relative motion over ``D``
+    (:func:`_relative_motion`). All bound the exact distance anywhere on the path; ``tol``
+    (1e-6 ``distance`` plus 1e-12 of the largest coordinate) keeps them bounds under
+    round-off, so a pair they clear passes the exact tests too."""
+
+    def __init__(
+        self, cands: CandidateList, x0: FloatArray, D: FloatArray, *,
+        distance: float, floor: float, eps: float,
+    ) -> None:  # fmt: skip
+        self.cands, self.x0, self.D = cands, x0, D
+        self.distance, self.floor, self.eps = distance, floor, eps
+        scale = max(1.0, float(np.max(np.abs(x0), initial=0.0)))
+        self.tol = 1e-6 * distance + 1e-12 * scale
+        self.r0 = 2.0 * motion_radius(x0 - cands.x_build)
+        self.rD = 2.0 * motion_radius(D)
+        self._pairs: list | None = None
+        self._alpha = 0.0  # the largest alpha the pair bounds hold the rows of
+
+    def _clear(self, lb: FloatArray | float, floor: FloatArray | float):
+        return (lb > self.eps + self.tol) & (lb >= floor + self.tol)
+
+    def all_clear(self, alpha: float) -> bool:
+        """Whether no listed pair can come within ``eps`` on the path of ``alpha D`` or end
+        below its floor (the bound of all pairs at once)."""
+        lb = self.cands.min_distance - self.r0 - alpha * self.rD
+        return bool(self._clear(lb, self.floor * self.distance))
+
+    def rows(self, alpha: float) -> tuple[tuple[IntArray, IntArray], tuple[IntArray, IntArray]]:
+        """The point-triangle and edge-edge rows of the list the pair bounds do not clear
+        for ``alpha``: those that can come within ``eps`` on the path, those that can end
+        below their floor."""
+        c, x0, D = self.cands, self.x0, self.D
+        if self._pairs is None or alpha > self._alpha:
+            self._pairs, self._alpha = [], alpha
+            for dist, g, split in ((c.pt_dist, c.pt_nodes, 1), (c.ee_dist, c.ee_nodes, 2)):
+                lb = dist - (self.r0 + alpha * self.rD)
+                s = np.flatnonzero(~self._clear(lb, self.floor * self.distance))
+                gs = g[s]
+                d0 = _pt_distances(x0, gs) if split == 1 else _ee_distances(x0, gs)
+                self._pairs.append((s, d0, _relative_motion(D, gs, split)))
+        cross, low = [], []
+        for s, d0, rm in self._pairs:
+            lb = d0 - alpha * rm
+            cross.append(s[~(lb > self.eps + self.tol)])
+            low.append(s[~(lb >= self.floor * np.minimum(d0, self.distance) + self.tol)])
+        return (cross[0], cross[1]), (low[0], low[1])
 
 
 def _impact_zones(
