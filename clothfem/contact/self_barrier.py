@@ -74,8 +74,10 @@ list covering the path stays local).
 **Parallel layout.** Like the explicit self-contact, every rank gathers all node positions
 (``Allgatherv``), evaluates every pair redundantly (the same bits on every rank) and adds
 the gradient to its owned rows; the Hessian's owned rows go into one AIJ matrix holding the
-fabric tangent's pattern joined with the 3x3 blocks of every node pair of the candidate list
-(fixed while the list is valid).
+fabric tangent's pattern joined with the 3x3 blocks of the node pairs of the candidate list's
+pairs built within ``d + skin`` (a list a filter rebuilds with a wider skin keeps the
+pattern small), kept while the list is valid and while it holds every pair in use (else
+rebuilt with them, decided on all ranks together).
 
 **Friction between layers** (``mu`` > 0; IPC's lagged, smoothed Coulomb friction). At the
 start of each step (:meth:`SelfBarrier.begin_step`, positions ``x^n``) the pairs within
@@ -106,6 +108,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+from mpi4py import MPI
 from numpy.typing import NDArray
 from petsc4py import PETSc
 
@@ -631,7 +634,6 @@ class SelfBarrier:
         self.wall = 0.0
         self._last = (0, math.inf, 0.0, 0.0)
         self._fric: FrictionPairs | None = None  # this step's frozen friction pairs
-        self._fric_list: CandidateList | None = None  # the list they were taken from
         self._eps = 0.0  # this step's slip of full sliding [m]
         self.friction_work = self._work = 0.0  # layer friction's work: total, since record
 
@@ -707,7 +709,6 @@ class SelfBarrier:
         xa = self.positions(x)
         idx, coef, force = self._pair_forces(xa)
         self._fric = friction_pairs(xa, idx, coef, force)
-        self._fric_list = self.candidates
         self._eps = self.params.slip_velocity * dt
         self.wall += time.perf_counter() - t0
 
@@ -787,23 +788,25 @@ class SelfBarrier:
         fa[: 3 * self.n] += G[self.lo : self.lo + self.n].ravel()
         self.wall += time.perf_counter() - t0
 
-    def _layout(self, K: PETSc.Mat):
-        """The combined pattern of ``K`` and the candidate list's node-pair blocks."""
+    def _layout(self, K: PETSc.Mat, need: IntArray | None = None):
+        """The combined pattern of ``K`` and the node-pair blocks of the candidate list's
+        pairs built within ``d + skin`` (not the wider skin a filter rebuild may take), plus
+        those of the node groups ``need`` (M, 4) when given: a pattern missing a block of
+        the pairs in use is rebuilt with them (:meth:`jacobian`)."""
         kp, ki, _ = K.getValuesCSR()
         c = self.candidates
-        # the friction's pairs are rows of the list they came from; after a rebuild within
-        # the step they may not be in the new one
-        fp = self._fric if self._fric is not None and self._fric_list is not c else None
         if (
-            self._pattern is not None
+            need is None
+            and self._pattern is not None
             and self._pattern[0] is c
-            and self._pattern[4] is fp
             and np.array_equal(self._pattern[1], kp)
             and np.array_equal(self._pattern[2], ki)
         ):
             return self._pattern[3]
+        reach = self.params.distance + self.params.skin_length
+        groups = [c.pt_nodes[c.pt_dist < reach], c.ee_nodes[c.ee_dist < reach]]
+        groups = np.concatenate(groups + ([need] if need is not None else []))
         nloc, ncol = K.getLocalSize()[0], np.int64(K.getSize()[1])
-        groups = np.concatenate([c.pt_nodes, c.ee_nodes] + ([fp.idx] if fp is not None else []))
         a = np.repeat(groups, 4, axis=1).ravel()
         b = np.tile(groups, (1, 4)).ravel()
         own = (a >= self.lo) & (a < self.lo + self.n)
@@ -831,27 +834,34 @@ class SelfBarrier:
         C.setOption(PETSc.Mat.Option.NEW_NONZERO_LOCATION_ERR, True)
         self._C = C
         lay = (keys, indptr, indices, np.searchsorted(keys, k_keys), ncol)
-        self._pattern = (c, kp.copy(), ki.copy(), lay, fp)
+        self._pattern = (c, kp.copy(), ki.copy(), lay)
         return lay
 
     def jacobian(self, x: PETSc.Vec, K: PETSc.Mat) -> PETSc.Mat:
         """K + d^2E/dx^2 as a matrix of its own (the pattern of ``K`` joined with the node-pair
-        blocks of the candidate list; kept while both are), collective."""
+        blocks of the candidate list's near pairs; kept while both are and while it holds
+        the pairs in use), collective."""
         t0 = time.perf_counter()
         xa = self.positions(x)
         _, node, _, hess, _ = self._terms(xa, hessian=True)  # (re)builds the list first
-        keys, indptr, indices, pos_k, ncol = self._layout(K)
-        _, _, kv = K.getValuesCSR()
-        data = np.zeros(len(keys)) if self._C_data is None else self._C_data
-        data[:] = 0.0
-        data[pos_k] = kv
         r_node = np.repeat(node, 3, axis=1)  # (M, 12) node of each row
         own = (r_node >= self.lo) & (r_node < self.lo + self.n)
         r_loc = 3 * (r_node - self.lo) + np.tile(np.arange(3), 4)
         c_glob = self.row0[np.repeat(node, 3, axis=1)] + np.tile(np.arange(3), 4)
-        ek = r_loc[:, :, None].astype(np.int64) * ncol + c_glob[:, None, :]
+        lay = self._layout(K)
+        ek = r_loc[:, :, None].astype(np.int64) * lay[4] + c_glob[:, None, :]
         sel = np.broadcast_to(own[:, :, None], ek.shape)
-        np.add.at(data, np.searchsorted(keys, ek[sel]), hess[sel])
+        at = np.searchsorted(lay[0], ek[sel])
+        held = bool(np.all(lay[0][np.minimum(at, len(lay[0]) - 1)] == ek[sel]))
+        if not self.comm.allreduce(held, op=MPI.LAND):  # a pair outside the near ones
+            lay = self._layout(K, need=node)
+            at = np.searchsorted(lay[0], ek[sel])
+        keys, indptr, indices, pos_k, _ = lay
+        _, _, kv = K.getValuesCSR()
+        data = np.zeros(len(keys)) if self._C_data is None else self._C_data
+        data[:] = 0.0
+        data[pos_k] = kv
+        np.add.at(data, at, hess[sel])
         C = self._C
         if self._C_data is None:
             C.setValuesCSR(indptr, indices, data)

@@ -93,7 +93,7 @@ def pressed(tmp_path_factory):
         frames.append(barrier.positions())
         recs.append((r, barrier.record()))
 
-    dc.run(t_end=0.2, dt=0.05, on_step=on_step)
+    dc.run(t_end=0.3, dt=0.05, on_step=on_step)
     return barrier, model, frames, recs
 
 
@@ -265,3 +265,51 @@ def test_sheet_sticking_below_the_limit(tmp_path_factory):
     if COMM.rank == 0:
         print(f"sticking: creep {creep:.3g} m, free {0.25 * limit * t[-1] ** 2:.3g} m")
     assert creep < barrier.params.slip_velocity * t[-1]
+
+
+def test_jacobian_pattern_takes_pairs_beyond_the_near_list(tmp_path_factory):
+    """A candidate list built with a wide skin (as the step filter builds one for a long
+    step) gives the Jacobian only its near pairs' blocks; when the sheets then come within
+    d by pairs that were farther at build, the Jacobian takes their blocks (on every rank
+    together) and still passes the Taylor test of the residual (order > 1.8)."""
+    from clothfem.contact.self_contact import build_candidates
+
+    tmp = COMM.bcast(tmp_path_factory.mktemp("wide") if COMM.rank == 0 else None)
+    sm = sheets(tmp, top=TOP, z0=3.0 * T, n_bottom=4, n_top=3, shift=(0.0013, 0.0007))
+    model = ShellModel(sm, material=MAT, thickness=T, supports=[Clamp("edges")])
+    system = dy.ShellSystem(model)
+    barrier = SelfBarrier(system, params=SelfBarrierParameters(distance=T))
+    x0 = barrier.positions()
+    barrier.candidates = build_candidates(x0, barrier.surface, distance=T, skin=6.0 * T)
+    reach = T + barrier.params.skin_length
+    assert np.all(barrier.candidates.pt_dist[barrier.X[barrier.candidates.pt_node, 2] > T] > reach)
+    x = system.create_vector()
+    system.get_state(x)
+    n = model.n_owned
+    top = (model.x_nodes[:n, 2] > 0.5 * T).astype(float)
+    x.getArray()[2 : 3 * n : 3] = -2.4 * T * top  # the top sheet 0.6 d above the bottom
+    assert barrier.candidates.valid(barrier.positions(x))  # no rebuild: the wide list holds
+    K = system.jacobian(x)
+    H = barrier.jacobian(x, K).copy()
+    H.axpy(-1.0, K, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+
+    def grad(y):
+        f = y.duplicate()
+        f.set(0.0)
+        barrier.add_residual(y, f)
+        return f
+
+    f0 = grad(x)
+    assert barrier.record().pairs > 50
+    v = x.duplicate()
+    v.set(0.0)
+    v.getArray()[: 3 * n] = np.random.default_rng(3 + COMM.rank).normal(size=3 * n) * 2e-5
+    Hv = x.duplicate()
+    H.mult(v, Hv)
+    e2 = []
+    for h in (0.5**k for k in range(5)):
+        xh = x.copy()
+        xh.axpy(h, v)
+        e2.append((grad(xh) - f0 - h * Hv).norm())
+    o2 = np.log2(np.array(e2[:-1]) / e2[1:])
+    assert np.all(o2 > 1.8), o2
