@@ -247,13 +247,17 @@ class BarrierPairs(NamedTuple):
     weight: FloatArray
 
 
+def _triangle_areas(x: FloatArray, tri: IntArray) -> FloatArray:
+    return 0.5 * np.linalg.norm(
+        np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]]), axis=1
+    )
+
+
 def vertex_areas(x: FloatArray, surface: FabricSurface) -> FloatArray:
     """Lumped vertex areas (N,) [m^2] of the surface at ``x``: a third of the adjacent
     triangles' areas."""
     tri = surface.triangles
-    a = 0.5 * np.linalg.norm(
-        np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]]), axis=1
-    )
+    a = _triangle_areas(x, tri)
     return np.bincount(tri.ravel(), weights=np.repeat(a / 3.0, 3), minlength=surface.n_nodes)
 
 
@@ -375,9 +379,7 @@ def edge_areas(x: FloatArray, surface: FabricSurface) -> FloatArray:
     """Lumped edge areas (E,) [m^2] of the surface's ``edges`` at ``x``: a third of each
     adjacent triangle's area."""
     tri = surface.triangles
-    a = 0.5 * np.linalg.norm(
-        np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]]), axis=1
-    )
+    a = _triangle_areas(x, tri)
     n = np.int64(surface.n_nodes)
     keys = surface.edges[:, 0].astype(np.int64) * n + surface.edges[:, 1]
     e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
@@ -707,7 +709,8 @@ class SelfBarrier:
             return
         t0 = time.perf_counter()
         xa = self.positions(x)
-        idx, coef, force = self._pair_forces(xa)
+        rows = [(pr.idx, pr.coef, en[3]) for pr, en in self._barrier_parts(xa, hessian=False)]
+        idx, coef, force = (np.concatenate(a) for a in zip(*rows, strict=True))
         self._fric = friction_pairs(xa, idx, coef, force)
         self._eps = self.params.slip_velocity * dt
         self.wall += time.perf_counter() - t0
@@ -730,20 +733,16 @@ class SelfBarrier:
             xa, self.X, self.candidates, distance=p.distance, edge_area=self.edge_area
         )
 
-    def _pair_forces(self, xa: FloatArray) -> tuple[IntArray, FloatArray, FloatArray]:
-        """Nodes (M, 4), coefficients (M, 4) and forces -dE/ds (M,) [N] of the pairs within
-        d at ``xa``: node-triangle, then edge-edge."""
+    def _barrier_parts(self, xa: FloatArray, *, hessian: bool) -> list[tuple]:
+        """Per kind of pair within d at ``xa`` (node-triangle, then edge-edge): the pairs
+        and :func:`pair_energy` / :func:`edge_energy` of them (energy, gradients, Hessians,
+        forces)."""
         bp = self.pairs(xa)
-        force = pair_energy(xa, bp, params=self.params, hessian=False)[3]
+        parts = [(bp, pair_energy(xa, bp, params=self.params, hessian=hessian))]
         ep = self._edge_pairs(xa)
-        if ep is None:
-            return bp.idx, bp.coef, force
-        ef = edge_energy(xa, ep, params=self.params, hessian=False)[3]
-        return (
-            np.concatenate([bp.idx, ep.idx]),
-            np.concatenate([bp.coef, ep.coef]),
-            np.concatenate([force, ef]),
-        )
+        if ep is not None:
+            parts.append((ep, edge_energy(xa, ep, params=self.params, hessian=hessian)))
+        return parts
 
     def _terms(self, xa: FloatArray, *, hessian: bool) -> tuple:
         """At positions ``xa``: the energy [J], the node groups (M, 4), gradients (M, 12)
@@ -751,12 +750,10 @@ class SelfBarrier:
         (node-triangle, edge-edge) and the friction's, and the barrier's diagnostics (pairs,
         smallest distance, energy, force)."""
         p, h = self.params, hessian
-        bp = self.pairs(xa)
-        e, grad, hess, force = pair_energy(xa, bp, params=p, hessian=h)
+        barrier_parts = self._barrier_parts(xa, hessian=h)
+        (bp, (e, grad, hess, force)), edges = barrier_parts[0], barrier_parts[1:]
         parts, dist = [(bp.idx, grad, hess)], [bp.dist]
-        ep = self._edge_pairs(xa)
-        if ep is not None:
-            ee, eg, eh, ef = edge_energy(xa, ep, params=p, hessian=h)
+        for ep, (ee, eg, eh, ef) in edges:
             e, force = e + ee, np.concatenate([force, ef])
             parts.append((ep.idx, eg, eh))
             dist.append(ep.dist)

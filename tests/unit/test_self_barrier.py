@@ -31,6 +31,15 @@ from clothfem.contact.self_contact import build_candidates, fabric_surface, mesh
 D = 1e-3  # activation distance [m]
 
 
+def remainder_orders(at, f0, slope, curvature, steps):
+    """Observed orders of the Taylor remainders |f(h) - f0 - h slope| and |f(h) - f0 - h slope
+    - h^2 curvature / 2| over the halving ``steps`` h, f(h) = ``at(h)``."""
+    h = np.asarray(steps, dtype=float)
+    r1 = np.array([at(hk) for hk in h]) - f0 - h * slope
+    e1, e2 = np.abs(r1), np.abs(r1 - 0.5 * h * h * curvature)
+    return np.log2(e1[:-1] / e1[1:]), np.log2(e2[:-1] / e2[1:])
+
+
 def test_barrier_is_c2_at_the_activation_distance():
     """b, b', b'' vanish at s = d; b' and b'' agree with central differences inside."""
     s = np.array([0.1, 0.3, 0.7, 0.95]) * D
@@ -72,13 +81,12 @@ def test_distance_derivatives_taylor(case):
     s0, g, H = distance_derivatives(y0, c, free)
     rng = np.random.default_rng(3)
     v = rng.normal(size=12)
-    e1, e2 = [], []
-    for h in 1e-3 * 0.5 ** np.arange(4):
+
+    def at(h):
         y = y0 + h * v.reshape(1, 4, 3)
-        sh = distance_derivatives(y, *coef_at(y))[0][0]
-        e1.append(abs(sh - s0[0] - h * g[0] @ v))
-        e2.append(abs(sh - s0[0] - h * g[0] @ v - 0.5 * h * h * v @ H[0] @ v))
-    o1, o2 = np.log2(np.array(e1[:-1]) / e1[1:]), np.log2(np.array(e2[:-1]) / e2[1:])
+        return distance_derivatives(y, *coef_at(y))[0][0]
+
+    o1, o2 = remainder_orders(at, s0[0], g[0] @ v, v @ H[0] @ v, 1e-3 * 0.5 ** np.arange(4))
     assert np.all(o1 > 1.8), o1
     assert np.all(o2 > 2.7), o2
 
@@ -119,12 +127,9 @@ def test_energy_gradient_and_hessian_taylor():
     v = rng.normal(size=x0.shape) * 1e-2 * D
     vp = v[bp.idx].reshape(len(bp.dist), 12)
     Hv = np.einsum("mi,mij,mj->", vp, H, vp)
-    e1, e2 = [], []
-    for h in 0.5 ** np.arange(1, 6):
-        eh = energy(x0 + h * v)[0][0]
-        e1.append(abs(eh - e0 - h * np.sum(G * v)))
-        e2.append(abs(eh - e0 - h * np.sum(G * v) - 0.5 * h * h * Hv))
-    o1, o2 = np.log2(np.array(e1[:-1]) / e1[1:]), np.log2(np.array(e2[:-1]) / e2[1:])
+    o1, o2 = remainder_orders(
+        lambda h: energy(x0 + h * v)[0][0], e0, np.sum(G * v), Hv, 0.5 ** np.arange(1, 6)
+    )
     assert np.all(o1 > 1.8), o1
     assert np.all(o2 > 2.7), o2
 
@@ -171,12 +176,10 @@ def test_friction_energy_taylor(regime):
     v = np.random.default_rng(11).normal(size=x1.shape) * 1e-3 * D
     vp = v[fp.idx].reshape(len(fp.force), 12)
     Hv = np.einsum("mi,mij,mj->", vp, H, vp)
-    e1, e2 = [], []
-    for h in 0.5 ** np.arange(1, 6):
-        eh = friction_energy(x1 + h * v, fp, mu=p.mu, eps=eps)[0]
-        e1.append(abs(eh - e0 - h * np.sum(G * v)))
-        e2.append(abs(eh - e0 - h * np.sum(G * v) - 0.5 * h * h * Hv))
-    o1, o2 = np.log2(np.array(e1[:-1]) / e1[1:]), np.log2(np.array(e2[:-1]) / e2[1:])
+    o1, o2 = remainder_orders(
+        lambda h: friction_energy(x1 + h * v, fp, mu=p.mu, eps=eps)[0],
+        e0, np.sum(G * v), Hv, 0.5 ** np.arange(1, 6),
+    )  # fmt: skip
     assert np.all(o1 > 1.8), o1
     assert np.all(o2 > 2.7), o2
     w = np.linalg.eigvalsh(H)  # positive semi-definite per pair
@@ -213,12 +216,10 @@ def test_cross_product_derivatives_taylor():
     e0, e1 = y0[0, 1] - y0[0, 0], y0[0, 3] - y0[0, 2]
     assert c0[0] == pytest.approx(np.sum(np.cross(e0, e1) ** 2), rel=1e-12)
     v = rng.normal(size=12)
-    e1s, e2s = [], []
-    for h in 1e-2 * 0.5 ** np.arange(4):
-        ch = cross_derivatives(y0 + h * v.reshape(1, 4, 3))[0][0]
-        e1s.append(abs(ch - c0[0] - h * g[0] @ v))
-        e2s.append(abs(ch - c0[0] - h * g[0] @ v - 0.5 * h * h * v @ H[0] @ v))
-    o1, o2 = np.log2(np.array(e1s[:-1]) / e1s[1:]), np.log2(np.array(e2s[:-1]) / e2s[1:])
+    o1, o2 = remainder_orders(
+        lambda h: cross_derivatives(y0 + h * v.reshape(1, 4, 3))[0][0],
+        c0[0], g[0] @ v, v @ H[0] @ v, 1e-2 * 0.5 ** np.arange(4),
+    )  # fmt: skip
     assert np.all(o1 > 1.8), o1
     assert np.all(o2 > 2.7), o2
 
@@ -251,12 +252,10 @@ def test_edge_energy_gradient_and_hessian_taylor():
         y0 = x0[ep.idx[k]][None]
         e0, g, H, _ = energy(y0, k)
         v = rng.normal(size=12) * 1e-3 * D
-        e1, e2 = [], []
-        for h in 0.5 ** np.arange(4):
-            eh = energy(y0 + h * v.reshape(1, 4, 3), k)[0]
-            e1.append(abs(eh - e0 - h * g[0] @ v))
-            e2.append(abs(eh - e0 - h * g[0] @ v - 0.5 * h * h * v @ H[0] @ v))
-        o1, o2 = np.log2(np.array(e1[:-1]) / e1[1:]), np.log2(np.array(e2[:-1]) / e2[1:])
+        o1, o2 = remainder_orders(
+            lambda h, y0=y0, k=k, v=v: energy(y0 + h * v.reshape(1, 4, 3), k)[0],
+            e0, g[0] @ v, v @ H[0] @ v, 0.5 ** np.arange(4),
+        )  # fmt: skip
         assert np.all(o1 > 1.8), (k, o1)
         assert np.all(o2 > 2.7), (k, o2)
 

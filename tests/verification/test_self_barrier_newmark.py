@@ -74,6 +74,19 @@ def sheets(tmp, **kw):
     return load_msh(path, COMM)
 
 
+def recorded_run(dc, barrier, *, t_end, dt):
+    """Run ``dc`` to ``t_end`` [s] in steps of ``dt`` [s]: all node positions and (step
+    record, barrier record) at every accepted step."""
+    frames, recs = [], []
+
+    def on_step(r):
+        frames.append(barrier.positions())
+        recs.append((r, barrier.record()))
+
+    dc.run(t_end=t_end, dt=dt, on_step=on_step)
+    return frames, recs
+
+
 PRESSURE = 200.0  # [Pa] on both sheets, towards -z (a negative Pressure value)
 TOP = (0.005, 0.035, 0.005, 0.035)
 
@@ -89,13 +102,7 @@ def pressed(tmp_path_factory):
     system = dy.ShellSystem(model, rotary_scale=100.0)
     barrier = SelfBarrier(system, params=SelfBarrierParameters(distance=T))
     dc = DynamicContact(system, far_body, barrier=barrier, beta=0.49, gamma=0.9)
-    frames, recs = [], []
-
-    def on_step(r):
-        frames.append(barrier.positions())
-        recs.append((r, barrier.record()))
-
-    dc.run(t_end=0.3, dt=0.05, on_step=on_step)
+    frames, recs = recorded_run(dc, barrier, t_end=0.3, dt=0.05)
     return barrier, model, frames, recs
 
 
@@ -342,13 +349,7 @@ def test_tube_squashed_flat_between_plates():
         return geo, [(np.array([0, 0, v]), np.zeros(3)), (np.array([0, 0, -v]), np.zeros(3))]
 
     dc = DynamicContact(system, plates, barrier=barrier, beta=0.49, gamma=0.9)
-    frames, recs = [], []
-
-    def on_step(r):
-        frames.append(barrier.positions())
-        recs.append((r, barrier.record()))
-
-    dc.run(t_end=0.3, dt=0.01, on_step=on_step)
+    frames, recs = recorded_run(dc, barrier, t_end=0.3, dt=0.01)
     tri = barrier.surface.triangles
     checks = [check_surface(x, tri, radius=4 * T) for x in frames]
     low = min(c.min_distance for c in checks)
