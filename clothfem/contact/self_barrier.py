@@ -280,6 +280,23 @@ def _free_directions(coef: FloatArray, groups: tuple) -> FloatArray:
     return free
 
 
+def _near_rows(x: FloatArray, c: CandidateList, *, distance: float, edges: bool) -> IntArray:
+    """Rows of the list's node-triangle pairs (edge pairs if ``edges``) that can be closer
+    than ``distance`` [m] at ``x`` (N, 3): those that the lower bound (the build distance
+    less twice the :func:`~clothfem.contact.self_contact.motion_radius` of the motion since
+    the build) does not clear, then their compiled distances, each with a margin for
+    round-off (as :class:`~clothfem.contact.self_contact.FilterBounds`)."""
+    scale = max(1.0, float(np.max(np.abs(x), initial=0.0)))
+    reach = distance + 1e-6 * distance + 1e-12 * scale
+    moved = 2.0 * motion_radius(x - c.x_build)
+    built, nodes = (c.ee_dist, c.ee_nodes) if edges else (c.pt_dist, c.pt_nodes)
+    if c.min_distance - moved >= reach:
+        return np.zeros(0, dtype=np.intp)
+    rows = np.flatnonzero(~(built - moved >= reach))
+    compiled = _ee_distances if edges else _pt_distances
+    return rows[~(compiled(x, nodes[rows]) >= reach)]
+
+
 def barrier_pairs(
     x: FloatArray,
     surface: FabricSurface,
@@ -295,13 +312,7 @@ def barrier_pairs(
     then the compiled distance), with a margin for round-off; the closest points of those
     are then computed as for the whole list (row by row: the same bits)."""
     c = candidates
-    scale = max(1.0, float(np.max(np.abs(x), initial=0.0)))
-    reach = distance + 1e-6 * distance + 1e-12 * scale  # (round-off: FilterBounds)
-    rows = np.zeros(0, dtype=np.intp)
-    moved = 2.0 * motion_radius(x - c.x_build)
-    if c.min_distance - moved < reach:
-        rows = np.flatnonzero(~(c.pt_dist - moved >= reach))
-        rows = rows[~(_pt_distances(x, c.pt_nodes[rows]) >= reach)]
+    rows = _near_rows(x, c, distance=distance, edges=False)
     if rows.size == 0:
         return BarrierPairs(
             c.pt_nodes[:0], np.zeros((0, 4)), np.zeros((0, 4, 2)), *[np.zeros(0)] * 2
@@ -440,8 +451,8 @@ def edge_pairs(
     3), with weights ``(A_e0 + A_e1) / 4`` from the lumped ``edge_area`` and the mollifier
     threshold ``1e-3 |E0|^2 |E1|^2`` of the reference edges (``X``)."""
     c = candidates
-    # the compiled distances select the pairs (with a margin), the exact ones decide
-    cand = np.flatnonzero(_ee_distances(x, c.ee_nodes) < distance * (1.0 + 1e-9))
+    # the bounds select the pairs (with a margin), the exact distances decide
+    cand = _near_rows(x, c, distance=distance, edges=True)
     y = [x[c.ee_nodes[cand, k]] for k in range(4)]
     s, t, dist = segment_closest(*y)
     par = _parallel(y[1] - y[0], y[3] - y[2])
@@ -644,6 +655,8 @@ class SelfBarrier:
     # candidate list was found valid at (the list, the positions)
     _gathered: tuple | None = None
     _valid_at: tuple | None = None
+    _chosen: tuple | None = None  # (list, positions, pairs within d there): _selected
+    _slotted: tuple | None = None  # (layout, node groups, own rows, positions): _slots
 
     def _gather(self, a: FloatArray) -> FloatArray:
         out = np.empty(int(self._counts.sum()))
@@ -733,13 +746,24 @@ class SelfBarrier:
             xa, self.X, self.candidates, distance=p.distance, edge_area=self.edge_area
         )
 
+    def _selected(self, xa: FloatArray) -> tuple[BarrierPairs, EdgePairs | None]:
+        """The node-triangle and edge-edge pairs within d at ``xa``; those of the last
+        positions asked are kept (the Jacobian and the step's start ask again for the
+        positions of the last residual)."""
+        c = self._list(xa)
+        last = self._chosen
+        if last is not None and last[0] is c and np.array_equal(last[1], xa):
+            return last[2]
+        chosen = (self.pairs(xa), self._edge_pairs(xa))
+        self._chosen = (c, xa.copy(), chosen)
+        return chosen
+
     def _barrier_parts(self, xa: FloatArray, *, hessian: bool) -> list[tuple]:
         """Per kind of pair within d at ``xa`` (node-triangle, then edge-edge): the pairs
         and :func:`pair_energy` / :func:`edge_energy` of them (energy, gradients, Hessians,
         forces)."""
-        bp = self.pairs(xa)
+        bp, ep = self._selected(xa)
         parts = [(bp, pair_energy(xa, bp, params=self.params, hessian=hessian))]
-        ep = self._edge_pairs(xa)
         if ep is not None:
             parts.append((ep, edge_energy(xa, ep, params=self.params, hessian=hessian)))
         return parts
@@ -773,9 +797,9 @@ class SelfBarrier:
         """dE/dx (N, 3) [N] of the barrier and this step's friction at the positions ``xa``
         (N, 3) [m] of all nodes (the forces on the nodes are its negative)."""
         _, idx, grad, _, self._last = self._terms(xa, hessian=False)
-        G = np.zeros((self.surface.n_nodes, 3))
-        np.add.at(G, idx.ravel(), grad.reshape(-1, 3))
-        return G
+        n, node, g = self.surface.n_nodes, idx.ravel(), grad.reshape(-1, 3)
+        # summed in the pairs' order, as np.add.at would (bincount is its fast form)
+        return np.column_stack([np.bincount(node, weights=g[:, k], minlength=n) for k in range(3)])
 
     def add_residual(self, x: PETSc.Vec, f: PETSc.Vec) -> None:
         """f += dE/dx on this rank's u rows (collective)."""
@@ -841,30 +865,58 @@ class SelfBarrier:
         t0 = time.perf_counter()
         xa = self.positions(x)
         _, node, _, hess, _ = self._terms(xa, hessian=True)  # (re)builds the list first
-        r_node = np.repeat(node, 3, axis=1)  # (M, 12) node of each row
-        own = (r_node >= self.lo) & (r_node < self.lo + self.n)
-        r_loc = 3 * (r_node - self.lo) + np.tile(np.arange(3), 4)
-        c_glob = self.row0[np.repeat(node, 3, axis=1)] + np.tile(np.arange(3), 4)
-        lay = self._layout(K)
-        ek = r_loc[:, :, None].astype(np.int64) * lay[4] + c_glob[:, None, :]
-        sel = np.broadcast_to(own[:, :, None], ek.shape)
-        at = np.searchsorted(lay[0], ek[sel])
-        held = bool(np.all(lay[0][np.minimum(at, len(lay[0]) - 1)] == ek[sel]))
-        if not self.comm.allreduce(held, op=MPI.LAND):  # a pair outside the near ones
-            lay = self._layout(K, need=node)
-            at = np.searchsorted(lay[0], ek[sel])
+        m = len(node)
+        lay, own, at = self._slots(K, node)
         keys, indptr, indices, pos_k, _ = lay
         _, _, kv = K.getValuesCSR()
-        data = np.zeros(len(keys)) if self._C_data is None else self._C_data
-        data[:] = 0.0
-        data[pos_k] = kv
-        np.add.at(data, at, hess[sel])
+        sel = np.broadcast_to(own[:, :, :, None, None], (m, 4, 3, 4, 3))
+        h = hess.reshape(m, 4, 3, 4, 3)[sel]
+        data = np.empty(len(keys)) if self._C_data is None else self._C_data
+        # K's value, then the pairs' in their order, as np.add.at would (bincount: its fast form)
+        data[:] = np.bincount(
+            np.concatenate([pos_k, at]), weights=np.concatenate([kv, h]), minlength=len(keys)
+        )
         C = self._C
         if self._C_data is None:
             C.setValuesCSR(indptr, indices, data)
         C.assemble()  # also marks the new values
         self.wall += time.perf_counter() - t0
         return C
+
+    def _slots(self, K: PETSc.Mat, node: IntArray) -> tuple[tuple, NDArray[np.bool_], IntArray]:
+        """The combined layout (:meth:`_layout`), which rows of the pairs' node groups
+        ``node`` (M, 4) are this rank's (M, 4, 3) and the positions in the layout's values
+        of those rows' entries (in the order of the pairs' Hessians); kept while the layout
+        and the node groups are (collective)."""
+        lay = self._layout(K)
+        last = self._slotted
+        hit = last is not None and last[0] is lay and np.array_equal(last[1], node)
+        if self.comm.size > 1:
+            hit = self.comm.allreduce(int(not hit)) == 0
+        if hit:
+            return last[0], last[2], last[3]
+        m = len(node)
+        # the key of each 3 x 3 block's row (pair, row node, row component) and first
+        # column (column node): a block's three columns follow each other in the pattern
+        r_node = np.repeat(node, 3, axis=1).reshape(m, 4, 3)
+        own = (r_node >= self.lo) & (r_node < self.lo + self.n)
+        r_loc = (3 * (r_node - self.lo) + np.arange(3)).astype(np.int64)
+        ek = r_loc[:, :, :, None] * lay[4] + self.row0[node][:, None, None, :]  # (M, 4, 3, 4)
+        at, held = self._positions(lay[0], ek[own].ravel())
+        if not self.comm.allreduce(held, op=MPI.LAND):  # a pair outside the near ones
+            lay = self._layout(K, need=node)
+            at, _ = self._positions(lay[0], ek[own].ravel())
+        self._slotted = (lay, node.copy(), own, at)
+        return lay, own, at
+
+    @staticmethod
+    def _positions(keys: NDArray[np.int64], first: NDArray[np.int64]) -> tuple[IntArray, bool]:
+        """Positions (B * 3,) in the sorted pattern ``keys`` of the three columns of the
+        blocks whose first keys are ``first`` (B,), and whether the pattern holds them all."""
+        at = (np.searchsorted(keys, first)[:, None] + np.arange(3)).ravel()
+        want = (first[:, None] + np.arange(3)).ravel()
+        held = bool(np.all(keys[np.minimum(at, len(keys) - 1)] == want))
+        return at, held
 
     # ----------------------------------------------------------------- step filter
     def max_step(self, x0: FloatArray, dx: FloatArray) -> float:

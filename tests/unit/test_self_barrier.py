@@ -270,8 +270,11 @@ def test_edge_energy_vanishes_for_parallel_edges():
         q = np.array([0.0, 0.0, 0.5 * D])
         r = np.array([np.cos(angle), np.sin(angle), 0.0]) * 0.01
         x = np.array([[-0.01, 0.0, 0.0], [0.01, 0.0, 0.0], q - r, q + r])
-        # a candidate list of the one edge pair (edge_pairs reads ee and ee_nodes)
-        cands = SimpleNamespace(ee=np.array([[0, 1]]), ee_nodes=np.array([[0, 1, 2, 3]]))
+        # a candidate list of the one edge pair, built at x (what edge_pairs reads)
+        cands = SimpleNamespace(
+            ee=np.array([[0, 1]]), ee_nodes=np.array([[0, 1, 2, 3]]), x_build=x,
+            ee_dist=np.array([0.5 * D]), min_distance=0.5 * D,
+        )  # fmt: skip
         ep = edge_pairs(x, x, cands, distance=D, edge_area=np.ones(2))
         assert len(ep.dist) == 1 and ep.dist[0] == pytest.approx(0.5 * D, rel=1e-12)
         return edge_energy(x, ep, params=p)
