@@ -163,19 +163,24 @@ class DynamicContact:
         self._xt = self.x.duplicate()
 
     def state_arrays(self) -> dict:
-        """Everything a resumed run needs (rank-local): time, x, v, a, the shell's and the
-        contact solver's state."""
+        """Everything a resumed run needs (rank-local): time, x, v, a, the shell's, the
+        contact solver's and the self-contact barrier's state."""
         out = {"t": np.array(self.t), "h": np.array(self.h or 0.0), "streak": np.array(self.streak)}
         for k in ("x", "v", "a"):
             out[k] = getattr(self, k).getArray(readonly=True).copy()
         out.update({f"model_{k}": v for k, v in self.system.model.state_arrays().items()})
         out.update({f"contact_{k}": v for k, v in self.contact.state_arrays().items()})
+        if self.barrier is not None:
+            out.update({f"barrier_{k}": v for k, v in self.barrier.state_arrays().items()})
         return out
 
     def restore_arrays(self, data) -> None:
-        """Inverse of :meth:`state_arrays` (collective)."""
+        """Inverse of :meth:`state_arrays` (collective). A checkpoint without the barrier's
+        state (written before it was saved) leaves the barrier to build a fresh list."""
         self.system.model.restore_arrays({k[6:]: data[k] for k in data if k.startswith("model_")})
         self.contact.restore_arrays({k[8:]: data[k] for k in data if k.startswith("contact_")})
+        if self.barrier is not None and "barrier_x_build" in data:
+            self.barrier.restore_arrays({k[8:]: data[k] for k in data if k.startswith("barrier_")})
         for k in ("x", "v", "a"):
             arr = getattr(self, k).getArray()
             if data[k].shape != arr.shape:

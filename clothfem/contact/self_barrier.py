@@ -642,6 +642,9 @@ class SelfBarrier:
         self.row0 = np.concatenate(self.comm.allgather(start + 3 * np.arange(n)))
         self.candidates: CandidateList | None = None
         self._pattern: tuple | None = None  # (candidate list, K pattern, combined layout)
+        # (candidate list, node groups (M, 4)): the blocks the list's patterns hold beyond
+        # its near pairs (the pairs in use outside them, :meth:`jacobian`)
+        self._extra: tuple[CandidateList, IntArray] | None = None
         self._C: PETSc.Mat | None = None
         self.filtered = self.rebuilds = 0
         self.wall = 0.0
@@ -812,8 +815,9 @@ class SelfBarrier:
     def _layout(self, K: PETSc.Mat, need: IntArray | None = None):
         """The combined pattern of ``K`` and the node-pair blocks of the candidate list's
         pairs built within ``d + skin`` (not the wider skin a filter rebuild may take), plus
-        those of the node groups ``need`` (M, 4) when given: a pattern missing a block of
-        the pairs in use is rebuilt with them (:meth:`jacobian`)."""
+        those of the node groups ``need`` (M, 4) when given, else of the groups the list's
+        last pattern took: a pattern missing a block of the pairs in use is rebuilt with
+        them (:meth:`jacobian`), and a list keeps them while it lives."""
         kp, ki, _ = K.getValuesCSR()
         c = self.candidates
         if (
@@ -825,8 +829,10 @@ class SelfBarrier:
         ):
             return self._pattern[3]
         reach = self.params.distance + self.params.skin_length
-        groups = [c.pt_nodes[c.pt_dist < reach], c.ee_nodes[c.ee_dist < reach]]
-        groups = np.concatenate(groups + ([need] if need is not None else []))
+        extra = need if need is not None else self._extra_groups()
+        groups = np.concatenate(
+            [c.pt_nodes[c.pt_dist < reach], c.ee_nodes[c.ee_dist < reach], extra]
+        )
         nloc, ncol = K.getLocalSize()[0], np.int64(K.getSize()[1])
         a = np.repeat(groups, 4, axis=1).ravel()
         b = np.tile(groups, (1, 4)).ravel()
@@ -856,7 +862,15 @@ class SelfBarrier:
         self._C = C
         lay = (keys, indptr, indices, np.searchsorted(keys, k_keys), ncol)
         self._pattern = (c, kp.copy(), ki.copy(), lay)
+        self._extra = (c, extra)
         return lay
+
+    def _extra_groups(self) -> IntArray:
+        """The node groups (M, 4) the current list's patterns hold beyond its near pairs."""
+        e = self._extra
+        if e is None or e[0] is not self.candidates:
+            return np.zeros((0, 4), dtype=np.intp)
+        return e[1]
 
     def jacobian(self, x: PETSc.Vec, K: PETSc.Mat) -> PETSc.Mat:
         """K + d^2E/dx^2 as a matrix of its own (the pattern of ``K`` joined with the node-pair
@@ -917,6 +931,35 @@ class SelfBarrier:
         want = (first[:, None] + np.arange(3)).ravel()
         held = bool(np.all(keys[np.minimum(at, len(keys) - 1)] == want))
         return at, held
+
+    # ----------------------------------------------------------------- checkpoint
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """What fixes the pairs and the Jacobian's pattern of the next steps: the candidate
+        list's build positions ``x_build`` (N, 3) [m] (no rows: no list yet) and ``skin``
+        [m], and the node groups ``need`` (M, 4) its pattern holds beyond the near pairs.
+        The same on every rank; restore with :meth:`restore_arrays`. (The friction's pairs
+        are frozen again at every step's start, :meth:`begin_step`.)"""
+        c = self.candidates
+        return {
+            "x_build": c.x_build.copy() if c is not None else np.zeros((0, 3)),
+            "skin": np.array(c.skin if c is not None else 0.0),
+            "need": self._extra_groups().astype(np.int64),
+        }
+
+    def restore_arrays(self, data: dict[str, np.ndarray]) -> None:
+        """Inverse of :meth:`state_arrays`: the list built again at its build positions
+        (:func:`~clothfem.contact.self_contact.build_candidates` is deterministic), whose
+        first pattern then takes the saved groups."""
+        x = np.asarray(data["x_build"], dtype=float)
+        if len(x) == 0:
+            self.candidates = self._extra = None
+            return
+        if x.shape != self.X.shape:
+            raise ValueError("checkpoint barrier state does not match this mesh")
+        p = self.params
+        c = build_candidates(x, self.surface, distance=p.distance, skin=float(data["skin"]))
+        self.candidates = c
+        self._extra = (c, np.asarray(data["need"], dtype=np.intp).reshape(-1, 4))
 
     # ----------------------------------------------------------------- step filter
     def max_step(self, x0: FloatArray, dx: FloatArray) -> float:

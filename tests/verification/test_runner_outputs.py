@@ -353,6 +353,58 @@ def test_resume_bit_for_bit_with_self_contact(tmp_path):
     assert min(int(r["self_pairs"]) for r in reference[100:]) >= 10
 
 
+def _squashed_tube() -> scenes.Scene:
+    """A tube (R = 10 mm, 8 x 2 cells, no support) on a fixed plate, a keyframed plate
+    closing on it in 0.1 s to 0.9 d (the fabric thickness) above the first: on the Newmark
+    path with fabric self-contact, the tube buckles, its walls pass within d of each other
+    and end pressed flat within d over the whole tube (about 1300 pairs)."""
+    r, half = 0.01, 0.02  # tube radius, plates' half thickness [m]
+
+    def plate(name: str, z: float) -> dict:
+        return {"name": name, "type": "fixed", "radii": [0.2, half, 0.2], "centre": [r, 0.0, z]}
+
+    lid = plate("lid", r + half)
+    top, bottom = [r, 0.0, r + half], [r, 0.0, -r + 0.9e-3 + half]
+    lid.update(type="keyframes", times=[0.0, 0.1], centres=[top, bottom])
+    data = {
+        "scene": {"name": "tube-squash", "description": "a tube pressed flat"},
+        "mesh": {"generator": "cylinder", "radius": r, "length": 2 * r, "n_around": 8,
+                 "n_along": 2},
+        "material": {"preset": "crimped-cotton", "thickness": 1e-3},
+        "body": [plate("floor", -r - half), lid],
+        "contact": {"mu": 0.1, "self_contact": True, "aj": "all", "torque_point": [r, 0.0, 0.0]},
+        "solver": {"integrator": "newmark", "dt": 0.01, "gamma": 0.9, "rotary_scale": 100.0,
+                   "settle_time": 0.0, "ramp_time": 0.0, "duration": 0.12},
+        "output": {"png": False, "checkpoint_every": 1},
+    }  # fmt: skip
+    return scenes.validate(data, base=ROOT)
+
+
+def test_resume_newmark_with_self_contact_pairs(tmp_path):
+    """The squashed tube on the Newmark path with the self-contact barrier, resumed from the
+    first checkpoint at which wall pairs are within the activation distance: every history
+    column but the timers is the uninterrupted run's string, through to the pressed end
+    (>1000 pairs). The checkpoint holds the barrier's candidate list (build positions and
+    skin) and the blocks its Jacobian's pattern took beyond the near pairs; a resume that
+    builds a fresh list at the checkpoint's positions instead (the code before they were
+    saved) parts from the uninterrupted run at round-off (kinetic energy and yarn strains
+    in the last digits). Measured 2026-12-03: resumed from row 29 of 41 serially (32 s for
+    the test), from row 24 of 26 on 2 ranks (70 s); bit for bit in both. On 2 ranks the
+    fresh list also repeated the two remaining rows: there the test does not tell the two
+    apart."""
+    base = _shared(tmp_path)
+    scene = _squashed_tube()
+    kept = _run_keeping_checkpoints(scene, base / "reference", tuple(range(1, 200)))
+    reference = _rows(base / "reference")
+    pairs = [int(r["self_pairs"]) for r in reference]
+    k = next(i + 1 for i, p in enumerate(pairs) if p > 0)
+    assert k < len(reference) and pairs[-1] > 1000  # steps with the barrier after it
+    with np.load(kept[k] / f"rank{COMM.rank}-of-{COMM.size}.npz") as z:
+        assert len(z["barrier_x_build"]) > 0
+    _resume_from(base / "reference", kept[k], base / "resumed", scene)
+    _same_history(reference, _rows(base / "resumed"))
+
+
 def test_resume_keeps_the_torque_table(tmp_path):
     """An explicit run with [[torques]] resumed from an early checkpoint: torques.csv (whose
     later rows the interrupted folder holds) ends as the uninterrupted run's, byte for byte,

@@ -324,6 +324,55 @@ def test_jacobian_pattern_takes_pairs_beyond_the_near_list(tmp_path_factory):
     assert np.all(o2 > 1.8), o2
 
 
+def _same_list(a, b) -> bool:
+    """Every array and number of two candidate lists (and of their tiles) equal."""
+    from dataclasses import fields
+
+    pairs = [(getattr(a, f.name), getattr(b, f.name)) for f in fields(a) if f.name != "tiles"]
+    pairs += list(zip(a.tiles, b.tiles, strict=True))
+    return all(np.array_equal(x, y) for x, y in pairs)
+
+
+def test_barrier_state_restores_the_list_and_the_pattern(tmp_path_factory):
+    """The barrier's checkpoint state: a list built with a wide skin whose Jacobian took the
+    blocks of far pairs in use (as in the test above), restored into a new barrier of the
+    same system, gives the same list (every array, rebuilt at the saved build positions
+    and skin) and the same Jacobian (pattern and values, bit for bit) without another
+    extension; a barrier that has built no list restores to none."""
+    from clothfem.contact.self_contact import build_candidates
+
+    tmp = COMM.bcast(tmp_path_factory.mktemp("state") if COMM.rank == 0 else None)
+    sm = sheets(tmp, top=TOP, z0=3.0 * T, n_bottom=4, n_top=3, shift=(0.0013, 0.0007))
+    model = ShellModel(sm, material=MAT, thickness=T, supports=[Clamp("edges")])
+    system = dy.ShellSystem(model)
+    params = SelfBarrierParameters(distance=T)
+    barrier = SelfBarrier(system, params=params)
+    empty = SelfBarrier(system, params=params)
+    empty.restore_arrays(barrier.state_arrays())
+    assert empty.candidates is None
+    barrier.candidates = build_candidates(
+        barrier.positions(), barrier.surface, distance=T, skin=6.0 * T
+    )
+    y = system.create_vector()
+    system.get_state(y)
+    x = y.copy()
+    n = model.n_owned
+    top = (model.x_nodes[:n, 2] > 0.5 * T).astype(float)
+    x.getArray()[2 : 3 * n : 3] = -2.4 * T * top  # within d by pairs far at build
+    K = system.jacobian(x)
+    barrier.jacobian(x, K)
+    data = barrier.state_arrays()
+    assert len(data["need"]) > 0  # the pattern took pairs beyond the near ones
+    restored = SelfBarrier(system, params=params)
+    restored.restore_arrays({k: v.copy() for k, v in data.items()})
+    assert restored.candidates is not barrier.candidates
+    assert _same_list(restored.candidates, barrier.candidates)
+    for z in (y, x):  # first at the build positions: no pair within d asks for the blocks
+        a, b = (bar.jacobian(z, K).getValuesCSR() for bar in (barrier, restored))
+        assert all(np.array_equal(u, v) for u, v in zip(a, b, strict=True))
+    assert np.array_equal(restored.state_arrays()["need"], data["need"])
+
+
 def test_tube_squashed_flat_between_plates():
     """A tube (R = 10 mm, 8 x 2 cells) squashed flat between two rigid plates (flat
     ellipsoids, Lagrange contact) closing smoothly to 0.6 d apart in 0.2 s: the barrier
