@@ -104,7 +104,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -292,9 +292,32 @@ def _near_rows(x: FloatArray, c: CandidateList, *, distance: float, edges: bool)
     built, nodes = (c.ee_dist, c.ee_nodes) if edges else (c.pt_dist, c.pt_nodes)
     if c.min_distance - moved >= reach:
         return np.zeros(0, dtype=np.intp)
-    rows = np.flatnonzero(~(built - moved >= reach))
+    rows = c.rows_within(reach + moved, edges=edges)  # the others are cleared
+    rows = rows[~(built[rows] - moved >= reach)]
     compiled = _ee_distances if edges else _pt_distances
     return rows[~(compiled(x, nodes[rows]) >= reach)]
+
+
+def near_list(c: CandidateList, x: FloatArray, *, distance: float) -> CandidateList:
+    """The pairs of the list ``c`` that can be within ``2 distance`` [m] of each other at
+    ``x`` (N, 3) [m] (those :func:`_near_rows` leaves), in the list's order, as a list built
+    at ``x`` with their distances there (:func:`near_list_holds`)."""
+    pt = _near_rows(x, c, distance=2.0 * distance, edges=False)
+    ee = _near_rows(x, c, distance=2.0 * distance, edges=True)
+    return replace(
+        c.subset(pt, ee), x_build=x.copy(),
+        pt_dist=_pt_distances(x, c.pt_nodes[pt]), ee_dist=_ee_distances(x, c.ee_nodes[ee]),
+    )  # fmt: skip
+
+
+def near_list_holds(near: CandidateList, x: FloatArray, *, distance: float) -> bool:
+    """Whether no pair of the full list left out of ``near`` (:func:`near_list`) can be
+    within ``distance`` [m] at ``x``: twice the motion radius since ``near`` was built is
+    less than ``distance`` (with the margin for round-off of :func:`_near_rows`), while the
+    full list is valid at ``x``."""
+    scale = max(1.0, float(np.max(np.abs(x), initial=0.0)))
+    tol = 1e-6 * distance + 1e-12 * scale
+    return 2.0 * motion_radius(x - near.x_build) < distance - tol
 
 
 def barrier_pairs(
@@ -660,6 +683,7 @@ class SelfBarrier:
     _valid_at: tuple | None = None
     _chosen: tuple | None = None  # (list, positions, pairs within d there): _selected
     _slotted: tuple | None = None  # (layout, node groups, own rows, positions): _slots
+    _near: tuple | None = None  # (candidate list, its pairs near some positions): _near_list
 
     def _gather(self, a: FloatArray) -> FloatArray:
         out = np.empty(int(self._counts.sum()))
@@ -705,10 +729,25 @@ class SelfBarrier:
             self._valid_at = (c, x.copy())
         return ok
 
+    def _near_list(self, xa: FloatArray) -> CandidateList:
+        """The pairs of the candidate list within ``2 d`` of each other at some positions
+        ``x_r`` (its ``x_build``, with the pairs' distances there), kept while no pair of
+        the list outside it can be within ``d`` at ``xa`` (twice the motion radius since
+        ``x_r`` less than ``d``, with a margin for round-off): the pair searches of the
+        Newton iterates read it instead of the whole list, whose skin a step filter's
+        rebuild may make wide."""
+        c, d = self._list(xa), self.params.distance
+        sub = self._near
+        if sub is not None and sub[0] is c and near_list_holds(sub[1], xa, distance=d):
+            return sub[1]
+        near = near_list(c, xa, distance=d)
+        self._near = (c, near)
+        return near
+
     def pairs(self, xa: FloatArray) -> BarrierPairs:
         """The pairs within the activation distance at positions ``xa`` (N, 3) [m]."""
         return barrier_pairs(
-            xa, self.surface, self._list(xa), distance=self.params.distance,
+            xa, self.surface, self._near_list(xa), distance=self.params.distance,
             vertex_area=self.vertex_area,
         )  # fmt: skip
 
@@ -746,7 +785,7 @@ class SelfBarrier:
             return None
         p = self.params
         return edge_pairs(
-            xa, self.X, self.candidates, distance=p.distance, edge_area=self.edge_area
+            xa, self.X, self._near_list(xa), distance=p.distance, edge_area=self.edge_area
         )
 
     def _selected(self, xa: FloatArray) -> tuple[BarrierPairs, EdgePairs | None]:

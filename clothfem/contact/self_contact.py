@@ -294,6 +294,28 @@ class CandidateList:
         )  # fmt: skip
 
     @cached_property
+    def _by_distance(self) -> tuple[tuple[IntArray, FloatArray], tuple[IntArray, FloatArray]]:
+        """Per kind (point-triangle, edge-edge): the rows in order of build distance and
+        those distances."""
+        out = []
+        for dist in (self.pt_dist, self.ee_dist):
+            order = np.argsort(dist, kind="stable")
+            out.append((order, dist[order]))
+        return out[0], out[1]
+
+    def rows_within(self, limit: float, *, edges: bool) -> IntArray:
+        """The rows, in list order, of the point-triangle (edge-edge if ``edges``) pairs
+        whose build distance is at most ``limit`` [m] (and a few ulps beyond: callers test
+        their own bound on these rows), found in the rows sorted by build distance."""
+        order, dist = self._by_distance[int(edges)]
+        k = np.searchsorted(dist, limit + 4.0 * np.spacing(abs(limit)), side="right")
+        if 16 * k < len(order):
+            return np.sort(order[:k])
+        mask = np.zeros(len(order), dtype=bool)
+        mask[order[:k]] = True
+        return np.flatnonzero(mask)
+
+    @cached_property
     def min_distance(self) -> float:
         """The smallest build distance [m] of a listed pair (inf for none)."""
         return min(
@@ -1328,9 +1350,11 @@ class FilterBounds:
         c, x0, D = self.cands, self.x0, self.D
         if self._pairs is None or alpha > self._alpha:
             self._pairs, self._alpha = [], alpha
+            reach = self.r0 + alpha * self.rD
+            limit = reach + max(self.eps, self.floor * self.distance) + self.tol
             for dist, g, split in ((c.pt_dist, c.pt_nodes, 1), (c.ee_dist, c.ee_nodes, 2)):
-                lb = dist - (self.r0 + alpha * self.rD)
-                s = np.flatnonzero(~self._clear(lb, self.floor * self.distance))
+                s = c.rows_within(limit, edges=split == 2)  # the others are cleared
+                s = s[~self._clear(dist[s] - reach, self.floor * self.distance)]
                 gs = g[s]
                 d0 = _pt_distances(x0, gs) if split == 1 else _ee_distances(x0, gs)
                 self._pairs.append((s, d0, _relative_motion(D, gs, split)))

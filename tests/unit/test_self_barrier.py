@@ -274,6 +274,7 @@ def test_edge_energy_vanishes_for_parallel_edges():
         cands = SimpleNamespace(
             ee=np.array([[0, 1]]), ee_nodes=np.array([[0, 1, 2, 3]]), x_build=x,
             ee_dist=np.array([0.5 * D]), min_distance=0.5 * D,
+            rows_within=lambda limit, edges: np.array([0]),
         )  # fmt: skip
         ep = edge_pairs(x, x, cands, distance=D, edge_area=np.ones(2))
         assert len(ep.dist) == 1 and ep.dist[0] == pytest.approx(0.5 * D, rel=1e-12)

@@ -14,6 +14,10 @@ from clothfem.contact.self_barrier import (
     _free_directions,
     _pt_distance,
     barrier_pairs,
+    edge_areas,
+    edge_pairs,
+    near_list,
+    near_list_holds,
     vertex_areas,
 )
 from clothfem.contact.self_contact import (
@@ -153,6 +157,46 @@ def test_barrier_pairs_are_the_reference_bits():
     got = barrier_pairs(far_away, surf, c, distance=D, vertex_area=va)
     assert len(got.dist) == 0 and got.idx.shape == (0, 4) and got.free.shape == (0, 4, 2)
     assert counts == {0, 1}
+
+
+def test_near_list_gives_the_full_lists_pairs():
+    """Along paths of small steps from the folded sheet (the folded half pressed down,
+    lifted, moved at random), the pairs within d found in the near list (kept while
+    near_list_holds, built again from the full list otherwise) are the full list's, node-
+    triangle and edge-edge, bit for bit; the near list is kept and rebuilt on the way and
+    holds fewer pairs than the full list; positions with and without pairs within d occur;
+    rows_within selects at least the rows within its limit."""
+    x, surf, far = folded_sheet()
+    va, ea = vertex_areas(x, surf), edge_areas(x, surf)
+    c = build_candidates(x, surf, distance=D, skin=6 * D)
+    for edges, dist in ((False, c.pt_dist), (True, c.ee_dist)):
+        for limit in (0.0, 0.5 * D, 2 * D, 1.0):
+            rows = c.rows_within(limit, edges=edges)
+            assert np.all(np.diff(rows) > 0) and set(np.flatnonzero(dist <= limit)) <= set(rows)
+    rng = np.random.default_rng(7)
+    kept = rebuilt = 0
+    found = set()  # whether pairs within d were found, per position
+    for dx in steps(x, far)[4:]:
+        near, y = near_list(c, x, distance=D), x.copy()
+        for _ in range(12):
+            y = y + dx / 12 + 0.02 * D * rng.normal(size=x.shape)
+            if not c.valid(y):
+                break
+            if near_list_holds(near, y, distance=D):
+                kept += 1
+            else:
+                near, rebuilt = near_list(c, y, distance=D), rebuilt + 1
+            assert len(near.pt_dist) + len(near.ee_dist) < len(c.pt_dist) + len(c.ee_dist)
+            for got, ref in (
+                (barrier_pairs(y, surf, near, distance=D, vertex_area=va),
+                 barrier_pairs(y, surf, c, distance=D, vertex_area=va)),
+                (edge_pairs(y, x, near, distance=D, edge_area=ea),
+                 edge_pairs(y, x, c, distance=D, edge_area=ea)),
+            ):  # fmt: skip
+                for a, b in zip(got, ref, strict=True):
+                    assert a.shape == b.shape and np.array_equal(a, b)
+                found.add(len(ref.dist) > 0)
+    assert kept > 0 and rebuilt > 0 and found == {True, False}
 
 
 def test_motion_radius_bounds_the_relative_motion():
