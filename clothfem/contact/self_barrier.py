@@ -387,10 +387,11 @@ def distance_derivatives(
     Hphi = (
         np.einsum("mj,ml->mjl", coef, coef)[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]
     )
-    Hphi = Hphi.reshape(m, 12, 12) - np.einsum("mik,mkl,mjl->mij", F, np.linalg.inv(W), F)
-    grad = g / s[:, None]
-    hess = Hphi / s[:, None, None] - np.einsum("mi,mj->mij", g, g) / (s**3)[:, None, None]
-    return s, grad, hess
+    Hphi = Hphi.reshape(m, 12, 12) - (F @ np.linalg.inv(W)) @ F.transpose(0, 2, 1)
+    hess = Hphi  # hess phi / s - grad phi grad phi^T / s^3, in place
+    hess /= s[:, None, None]
+    hess -= np.einsum("mi,mj->mij", g, g) / (s**3)[:, None, None]
+    return s, g / s[:, None], hess
 
 
 def pair_energy(
@@ -405,7 +406,9 @@ def pair_energy(
     grad = (k * db)[:, None] * gs
     if not hessian:
         return float(np.sum(k * b)), grad, None, -k * db
-    hess = (k * d2b)[:, None, None] * np.einsum("mi,mj->mij", gs, gs) + (k * db)[:, None, None] * hs
+    hess = hs  # k b'' grad s grad s^T + k b' hess s, in place
+    hess *= (k * db)[:, None, None]
+    hess += (k * d2b)[:, None, None] * np.einsum("mi,mj->mij", gs, gs)
     return float(np.sum(k * b)), grad, hess, -k * db
 
 
@@ -536,7 +539,7 @@ def edge_energy(
     y = x[pairs.idx]
     s, gs, hs = distance_derivatives(y, pairs.coef, pairs.free, hessian=hessian)
     b, db, d2b = barrier(s, distance=params.distance)
-    c, gc, hc = cross_derivatives(y, hessian=hessian)
+    c, gc, _ = cross_derivatives(y, hessian=False)
     ex = pairs.eps_x
     on = c < ex
     mol = np.where(on, (2.0 - c / ex) * c / ex, 1.0)
@@ -547,13 +550,16 @@ def edge_energy(
     grad = (k * dm * b)[:, None] * gc + (k * mol * db)[:, None] * gs
     if not hessian:
         return float(np.sum(k * mol * b)), grad, None, -k * mol * db
-    hess = (
-        (k * d2m * b)[:, None, None] * outer(gc, gc)
-        + (k * dm * b)[:, None, None] * hc
-        + (k * dm * db)[:, None, None] * (outer(gc, gs) + outer(gs, gc))
-        + (k * mol * d2b)[:, None, None] * outer(gs, gs)
-        + (k * mol * db)[:, None, None] * hs
-    )
+    # the terms in this order, summed in place; the mollifier's vanish unless a pair is on
+    # (0 + a is a: the same bits without them)
+    hess = (k * mol * d2b)[:, None, None] * outer(gs, gs)
+    if on.any():
+        hc = cross_derivatives(y, hessian=True)[2]
+        hess = (k * d2m * b)[:, None, None] * outer(gc, gc)
+        hess += (k * dm * b)[:, None, None] * hc
+        hess += (k * dm * db)[:, None, None] * (outer(gc, gs) + outer(gs, gc))
+        hess += (k * mol * d2b)[:, None, None] * outer(gs, gs)
+    hess += (k * mol * db)[:, None, None] * hs
     return float(np.sum(k * mol * b)), grad, hess, -k * mol * db
 
 
