@@ -119,6 +119,7 @@ from .self_contact import (
     FilterBounds,
     _ee_distances,
     _pt_distances,
+    bound_tolerance,
     build_candidates,
     closest_point_triangle,
     crossing_groups,
@@ -286,8 +287,7 @@ def _near_rows(x: FloatArray, c: CandidateList, *, distance: float, edges: bool)
     less twice the :func:`~clothfem.contact.self_contact.motion_radius` of the motion since
     the build) does not clear, then their compiled distances, each with a margin for
     round-off (as :class:`~clothfem.contact.self_contact.FilterBounds`)."""
-    scale = max(1.0, float(np.max(np.abs(x), initial=0.0)))
-    reach = distance + 1e-6 * distance + 1e-12 * scale
+    reach = distance + bound_tolerance(x, distance=distance)
     moved = 2.0 * motion_radius(x - c.x_build)
     built, nodes = (c.ee_dist, c.ee_nodes) if edges else (c.pt_dist, c.pt_nodes)
     if c.min_distance - moved >= reach:
@@ -315,8 +315,7 @@ def near_list_holds(near: CandidateList, x: FloatArray, *, distance: float) -> b
     within ``distance`` [m] at ``x``: twice the motion radius since ``near`` was built is
     less than ``distance`` (with the margin for round-off of :func:`_near_rows`), while the
     full list is valid at ``x``."""
-    scale = max(1.0, float(np.max(np.abs(x), initial=0.0)))
-    tol = 1e-6 * distance + 1e-12 * scale
+    tol = bound_tolerance(x, distance=distance)
     return 2.0 * motion_radius(x - near.x_build) < distance - tol
 
 
@@ -552,13 +551,14 @@ def edge_energy(
         return float(np.sum(k * mol * b)), grad, None, -k * mol * db
     # the terms in this order, summed in place; the mollifier's vanish unless a pair is on
     # (0 + a is a: the same bits without them)
-    hess = (k * mol * d2b)[:, None, None] * outer(gs, gs)
+    h_ss = (k * mol * d2b)[:, None, None] * outer(gs, gs)
+    hess = h_ss
     if on.any():
         hc = cross_derivatives(y, hessian=True)[2]
         hess = (k * d2m * b)[:, None, None] * outer(gc, gc)
         hess += (k * dm * b)[:, None, None] * hc
         hess += (k * dm * db)[:, None, None] * (outer(gc, gs) + outer(gs, gc))
-        hess += (k * mol * d2b)[:, None, None] * outer(gs, gs)
+        hess += h_ss
     hess += (k * mol * db)[:, None, None] * hs
     return float(np.sum(k * mol * b)), grad, hess, -k * mol * db
 

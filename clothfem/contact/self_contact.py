@@ -1304,6 +1304,13 @@ def crossing_groups(cands: CandidateList, surface, x0, x1, eps) -> tuple[IntArra
     return cands.pt_nodes[s_pt[h_pt]], cands.ee_nodes[s_ee[h_ee]]
 
 
+def bound_tolerance(x: FloatArray, *, distance: float) -> float:
+    """The margin [m] that keeps distance bounds bounds under round-off at positions ``x``
+    (N, 3) [m]: 1e-6 ``distance`` plus 1e-12 of the largest coordinate (at least 1 m)."""
+    scale = max(1.0, float(np.max(np.abs(x), initial=0.0)))
+    return 1e-6 * distance + 1e-12 * scale
+
+
 class FilterBounds:
     """Lower bounds on the listed pairs' distances along the steps ``alpha D`` from ``x0``
     (both (N, 3) [m]) for the step filter of the implicit barrier
@@ -1327,8 +1334,7 @@ class FilterBounds:
     ) -> None:  # fmt: skip
         self.cands, self.x0, self.D = cands, x0, D
         self.distance, self.floor, self.eps = distance, floor, eps
-        scale = max(1.0, float(np.max(np.abs(x0), initial=0.0)))
-        self.tol = 1e-6 * distance + 1e-12 * scale
+        self.tol = bound_tolerance(x0, distance=distance)
         self.r0 = 2.0 * motion_radius(x0 - cands.x_build)
         self.rD = 2.0 * motion_radius(D)
         self._pairs: list | None = None

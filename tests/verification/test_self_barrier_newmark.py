@@ -91,6 +91,14 @@ PRESSURE = 200.0  # [Pa] on both sheets, towards -z (a negative Pressure value)
 TOP = (0.005, 0.035, 0.005, 0.035)
 
 
+def clamped_sheets(tmp, *, z0: float):
+    """The two sheets ``z0`` [m] apart (the top one shifted), both clamped at their edges,
+    unloaded: the model and its Newmark system."""
+    sm = sheets(tmp, top=TOP, z0=z0, n_bottom=4, n_top=3, shift=(0.0013, 0.0007))
+    model = ShellModel(sm, material=MAT, thickness=T, supports=[Clamp("edges")])
+    return model, dy.ShellSystem(model)
+
+
 @pytest.fixture(scope="module")
 def pressed(tmp_path_factory):
     tmp = COMM.bcast(tmp_path_factory.mktemp("pressed") if COMM.rank == 0 else None)
@@ -177,9 +185,7 @@ def test_assembled_barrier_taylor(tmp_path_factory):
     of the u rows |E(x + h v) - E - h f.v| and |f(x + h v) - f - h K v| fall as h^2 (orders
     > 1.8), with the layers 0.62 d apart."""
     tmp = COMM.bcast(tmp_path_factory.mktemp("taylor") if COMM.rank == 0 else None)
-    sm = sheets(tmp, top=TOP, z0=0.62 * T, n_bottom=4, n_top=3, shift=(0.0013, 0.0007))
-    model = ShellModel(sm, material=MAT, thickness=T, supports=[Clamp("edges")])
-    system = dy.ShellSystem(model)
+    model, system = clamped_sheets(tmp, z0=0.62 * T)
     barrier = SelfBarrier(system, params=SelfBarrierParameters(distance=T))
     x = system.create_vector()
     system.get_state(x)
@@ -284,9 +290,7 @@ def test_jacobian_pattern_takes_pairs_beyond_the_near_list(tmp_path_factory):
     from clothfem.contact.self_contact import build_candidates
 
     tmp = COMM.bcast(tmp_path_factory.mktemp("wide") if COMM.rank == 0 else None)
-    sm = sheets(tmp, top=TOP, z0=3.0 * T, n_bottom=4, n_top=3, shift=(0.0013, 0.0007))
-    model = ShellModel(sm, material=MAT, thickness=T, supports=[Clamp("edges")])
-    system = dy.ShellSystem(model)
+    model, system = clamped_sheets(tmp, z0=3.0 * T)
     barrier = SelfBarrier(system, params=SelfBarrierParameters(distance=T))
     x0 = barrier.positions()
     barrier.candidates = build_candidates(x0, barrier.surface, distance=T, skin=6.0 * T)
@@ -342,9 +346,7 @@ def test_barrier_state_restores_the_list_and_the_pattern(tmp_path_factory):
     from clothfem.contact.self_contact import build_candidates
 
     tmp = COMM.bcast(tmp_path_factory.mktemp("state") if COMM.rank == 0 else None)
-    sm = sheets(tmp, top=TOP, z0=3.0 * T, n_bottom=4, n_top=3, shift=(0.0013, 0.0007))
-    model = ShellModel(sm, material=MAT, thickness=T, supports=[Clamp("edges")])
-    system = dy.ShellSystem(model)
+    model, system = clamped_sheets(tmp, z0=3.0 * T)
     params = SelfBarrierParameters(distance=T)
     barrier = SelfBarrier(system, params=params)
     empty = SelfBarrier(system, params=params)
