@@ -34,6 +34,11 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("n_active", "-", "nodes in contact"),
     ("max_penetration", "m", "largest penetration into the body after the step"),
     ("predictor_penetration", "m", "explicit: largest penetration of the contact-free predictor"),
+    (
+        "tissue_indentation",
+        "m",
+        "contact.tissue_stiffness: the largest give of the body's surface under the fabric",
+    ),
     ("min_multiplier", "N", "implicit: smallest normal multiplier of the active set"),
     ("complementarity", "N m", "implicit: max |lambda gap| over the nodes"),
     ("sum_lam", "N", "sum of the normal contact forces"),

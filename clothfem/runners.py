@@ -204,7 +204,9 @@ def run_contact_scene(
         bodies.append((pose.centre, pose.rotation, np.asarray(seg.radii, dtype=float)))
     # quasi-static wrinkling paths have several equilibria: the paper's fixed-set passes
     # (no semismooth set changes inside Newton) keep the branch independent of round-off
-    params = LagrangeContactParameters(mu=c.mu, semismooth_passes=0)
+    params = LagrangeContactParameters(
+        mu=c.mu, semismooth_passes=0, tissue_stiffness=c.tissue_stiffness
+    )
     contact = LagrangeContact(model, bodies, params=params)
     stab = None
     if c.stabilization > 0:
@@ -281,6 +283,11 @@ def run_contact_scene(
                 **torque_columns(tau, res, float(tau @ hinge_axis)),
                 "n_active": last.n_active,
                 "max_penetration": max(r.max_penetration for r in recs),
+                **(
+                    {"tissue_indentation": max(r.max_indentation for r in recs)}
+                    if c.tissue_stiffness is not None
+                    else {}
+                ),
                 "min_multiplier": min(r.min_multiplier for r in recs),
                 "complementarity": max(r.complementarity for r in recs),
                 "sum_lam": last.total_normal_force,

@@ -73,6 +73,7 @@ STATIC = When("solver.integrator", ("static",))
 NEWMARK = When("solver.integrator", ("newmark",))
 EXPLICIT = When("solver.integrator", ("explicit",))
 DYNAMIC = When("solver.integrator", ("newmark", "explicit"))
+IMPLICIT = When("solver.integrator", ("static", "newmark"))
 PSRI = When("element.scheme", ("psri",))
 SRI = When("element.scheme", ("sri",))
 
@@ -663,6 +664,15 @@ SCHEMA: dict[str, Section] = {
                 default=12,
                 lo=1,
                 when=NEWMARK,
+            ),
+            "tissue_stiffness": Key(
+                "float",
+                "a body that gives way: Winkler modulus k_w [Pa/m] of the soft tissue under "
+                "the fabric (a node pressed with force lam sinks lam / (k_w A) into the "
+                "body, A its lumped area); unset: rigid ellipsoids (the paper's)",
+                lo=0.0,
+                open_lo=True,
+                when=IMPLICIT,
             ),
             "torque_segment": Key(
                 "str",

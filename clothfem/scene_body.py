@@ -315,8 +315,13 @@ def contact_log(scene: Scene) -> list[str]:
     else:
         how = f"dynamic ({integrator}), settling {scene.solver.settle_time:g} s, "
     film = c.method == "film"
+    body = (
+        f"body: {len(segs)} ellipsoid(s), soft tissue k_w {c.tissue_stiffness:g} Pa/m: "
+        if c.tissue_stiffness is not None
+        else f"body: {len(segs)} rigid ellipsoid(s): "
+    )
     return [
-        f"body: {len(segs)} rigid ellipsoid(s): " + "; ".join(segs),
+        body + "; ".join(segs),
         f"contact: {c.method} "
         + (
             f"(forward-increment Lagrange multipliers, non-resilient, {c.kernel} kernel), "

@@ -517,6 +517,7 @@ class _Newmark:
                 tangential_penalty=c.tangential_penalty,
                 semismooth_passes=c.semismooth_passes,
                 newton_stall_limit=c.newton_stall_limit,
+                tissue_stiffness=c.tissue_stiffness,
             ),
             beta=(gamma + 0.5) ** 2 / 4,
             gamma=gamma,
@@ -576,6 +577,11 @@ class _Newmark:
             "load_factor": float(self.model.lam.value),
             "n_active": cr.n_active,
             "max_penetration": cr.max_penetration,
+            **(
+                {"tissue_indentation": cr.max_indentation}
+                if self.scene.contact.tissue_stiffness is not None
+                else {}
+            ),
             "min_multiplier": cr.min_multiplier,
             "complementarity": cr.complementarity,
             "sum_lam": cr.total_normal_force,

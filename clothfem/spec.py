@@ -210,6 +210,7 @@ class ContactSpec:
     tangential_penalty: float | None  # [N/m]
     semismooth_passes: int
     newton_stall_limit: int
+    tissue_stiffness: float | None  # [Pa/m]
     torque_segment: str | None
     torque_point: Vec3 | None  # [m]
     torque_with: tuple[str, ...] | None

@@ -4,13 +4,14 @@ For the active (node, ellipsoid) pairs of one Newton pass the linear system is
 
 .. math::
 
-    \begin{bmatrix} K + K_t & C \\ B & 0 \end{bmatrix}
+    \begin{bmatrix} K + K_t & C \\ B & D \end{bmatrix}
     \begin{bmatrix} \Delta x \\ \Delta\lambda \end{bmatrix} = \begin{bmatrix} -r \\ g \end{bmatrix}
 
 with K the fabric tangent (owned rows of the (u, theta) layout, global columns), C one column
 per pair on the node's three u rows, B one row per pair on the same columns, K_t a 3x3 block
-per pair (curvature of the constraint and friction) and Dirichlet rows replaced by identity
-rows. The multiplier rows of rank r follow its fabric rows in the global numbering.
+per pair (curvature of the constraint and friction), D diagonal (0 for a rigid body, minus
+the compliance of a soft one) and Dirichlet rows replaced by identity rows. The multiplier
+rows of rank r follow its fabric rows in the global numbering.
 
 :class:`BorderedMatrix` builds the sparsity pattern for a set of multiplier *slots* (pairs)
 and refreshes the values in place at every Newton iteration: the same PETSc matrix object
@@ -39,7 +40,8 @@ def _u_rows(nodes: NDArray[np.intp]) -> NDArray[np.intp]:
 class BorderedMatrix:
     """[[K + K_t, C], [B, D]] as one PETSc AIJ matrix whose pattern is fixed for the slots
     on ``nodes`` (owned node index per slot, repeated nodes allowed) and the Dirichlet rows
-    ``bc_rows`` (owned rows of the fabric block); D is 0 on active slots, 1 on the others.
+    ``bc_rows`` (owned rows of the fabric block); D is given on active slots (0 by
+    default), 1 on the others.
 
     Collective on ``K``'s communicator. ``K`` must keep its nonzero pattern between calls
     (the pattern is taken from the first ``K`` and checked at every :meth:`update`).
@@ -137,11 +139,13 @@ class BorderedMatrix:
         row: FloatArray,
         blocks: FloatArray,
         active: NDArray[np.bool_] | None = None,
+        diag: FloatArray | None = None,
     ) -> PETSc.Mat:
         """Write the values at the current iterate into :attr:`mat` and return it: ``col``
         (m, 3) the multiplier columns, ``row`` (m, 3) the constraint rows, ``blocks``
         (m, 3, 3) the K_t blocks, per slot in the order of ``nodes``; ``active`` (m,) marks
-        the slots in use (default all), the others get the row ``dlam = 0``."""
+        the slots in use (default all), the others get the row ``dlam = 0``; ``diag`` (m,)
+        is D on the slots in use (default 0; a compliant constraint's -c in m/N)."""
         if not self.matches(K):
             raise RuntimeError("the fabric tangent changed its sparsity pattern")
         _, _, kdata = K.getValuesCSR()
@@ -154,7 +158,7 @@ class BorderedMatrix:
         data[self._pos_k] = kdata[self._sel]
         data[self._pos_c] = col.ravel()[self._keep_c]
         data[self._pos_b] = row.ravel()
-        data[self._pos_d] = np.where(on, 0.0, 1.0)
+        data[self._pos_d] = np.where(on, 0.0 if diag is None else diag, 1.0)
         np.add.at(data, self._pos_t, blocks.ravel()[self._keep_t])
         data[self._pos_e] = 1.0
         if self.comm.size > 1:
@@ -174,6 +178,7 @@ def bordered_dense(
     blocks: FloatArray,
     bc_rows: NDArray[np.intp],
     active: NDArray[np.bool_] | None = None,
+    diag: FloatArray | None = None,
 ) -> FloatArray:
     """Dense twin of :class:`BorderedMatrix` (one process): K (n, n) with the slots' u rows
     ``urows`` (m, 3) and the multipliers appended as rows and columns n..n+m-1."""
@@ -187,6 +192,7 @@ def bordered_dense(
         A[u, n5 + j] += col[j]
         A[np.ix_(u, u)] += blocks[j]
         A[n5 + j, u] += row[j]
+        A[n5 + j, n5 + j] = 0.0 if diag is None else diag[j]
     A[bc_rows, :] = 0.0
     A[bc_rows, bc_rows] = 1.0
     return A

@@ -152,6 +152,14 @@ class LagrangeContactParameters:
         rest of the step instead, and the step is accepted if such a released pair penetrates
         by at most release_penetration (reported as the step's max_penetration); otherwise
         the step fails (and is cut).
+    tissue_stiffness: Winkler modulus k_w of the body's soft tissue in Pa/m (> 0); None
+        means rigid bodies (the paper's). With it an active pair's constraint is
+        ``gap + lam / (k_w A_i) = 0``: the body surface gives way by ``lam / (k_w A_i)``
+        under node ``i`` (``A_i`` its HRZ-lumped area on the undeformed mesh), so a node
+        pressed by two bodies that overlap (the fabric pinched in a flexed elbow) has a
+        solution; each (node, ellipsoid) pair is then a constraint of its own (no
+        one-body-per-node rule: the compliance keeps two nearly parallel constraints on a
+        node well posed).
     prefix: PETSc options prefix of the bordered linear solve.
     """
 
@@ -166,15 +174,21 @@ class LagrangeContactParameters:
     max_active_set: int = 30
     semismooth_passes: int = 5
     release_penetration: float | None = None
+    tissue_stiffness: float | None = None
     prefix: str = "contact_lagrange_"
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.mu) and self.mu >= 0):
             raise ValueError(f"mu must be a finite friction coefficient >= 0, got {self.mu!r}")
-        for name in ("tangential_penalty", "gap_tolerance", "release_penetration"):
+        units = {
+            "tangential_penalty": "N/m",
+            "gap_tolerance": "m",
+            "release_penetration": "m",
+            "tissue_stiffness": "Pa/m",
+        }
+        for name, unit in units.items():
             v = getattr(self, name)
             if v is not None and not (math.isfinite(v) and v > 0):
-                unit = "N/m" if name == "tangential_penalty" else "m"
                 raise ValueError(f"{name} must be None or a finite number > 0 {unit}, got {v!r}")
         if not (math.isfinite(self.multiplier_tolerance) and 0 <= self.multiplier_tolerance < 1):
             raise ValueError(
@@ -206,7 +220,9 @@ class ContactStepRecord:
     min_multiplier: smallest active lam in N (0 if none); complementarity: max|lam gap| in N m;
     active_set_iterations: passes until the set stopped changing; newton_iterations: total;
     n_stick / n_slip: active nodes sticking / slipping (0 at mu = 0); dissipation: frictional
-    dissipation of the step in J; total_normal_force: sum of lam in N; wall_time in s.
+    dissipation of the step in J; total_normal_force: sum of lam in N; wall_time in s;
+    max_indentation: the largest give of a compliant body's surface in m (0 when rigid).
+    On a compliant body max_penetration and complementarity measure the gap plus the give.
     """
 
     step: int
@@ -222,6 +238,7 @@ class ContactStepRecord:
     dissipation: float
     total_normal_force: float
     wall_time: float
+    max_indentation: float = 0.0
 
     def line(self) -> str:
         return (
@@ -339,6 +356,10 @@ class LagrangeContact:
         self._last_friction_pairs = np.zeros((n * self.nb, 3))
         self._build_solver()
         self._build_area_forms()
+        # m/N per owned node: the tissue's give under a unit force (None: rigid bodies)
+        self._compliance: FloatArray | None = None
+        if params.tissue_stiffness is not None:
+            self._compliance = 1.0 / (params.tissue_stiffness * self._reference_area())
         self._K: PETSc.Mat | None = None
         self._kkt: BorderedMatrix | None = None
         self._kkt_slots = np.zeros(0, dtype=np.intp)  # pairs with a multiplier row in _kkt
@@ -429,6 +450,14 @@ class LagrangeContact:
         self._gap_cache = (self._pose_version, x.copy(), out)
         return out
 
+    def _constraint(self, gap: FloatArray, pairs: NDArray[np.intp], lam: FloatArray) -> FloatArray:
+        """The constraint residual [m] of the (node, ellipsoid) ``pairs`` with gaps ``gap``
+        and multipliers ``lam`` [N]: the gap, plus the tissue's give ``c_i lam`` when the
+        body is compliant (0 at equilibrium on the active set)."""
+        if self._compliance is None:
+            return gap
+        return gap + self._compliance[pairs // self.nb] * lam
+
     def pair_forces(self):
         """Active (node, ellipsoid) pairs at the last converged step: (nodes, body index,
         force on the fabric [N] (normal multiplier plus friction), outward normal)."""
@@ -503,13 +532,23 @@ class LagrangeContact:
 
     def lumped_area(self) -> FloatArray:
         """HRZ-lumped nodal areas (m^2) of the current configuration, owned nodes (collective)."""
+        return self._lumped(self._mass_form, self._area_form)
+
+    def _reference_area(self) -> FloatArray:
+        """HRZ-lumped nodal areas (m^2) of the reference (mesh) configuration (collective)."""
+        w, v = ufl.TrialFunction(self.S), ufl.TestFunction(self.S)
+        dx = self.model.dx_full
+        one = fem.Constant(self.model.mesh, 1.0)
+        return self._lumped(fem.form(w * v * dx), fem.form(one * dx))
+
+    def _lumped(self, mass_form: fem.FormMetaClass, area_form: fem.FormMetaClass) -> FloatArray:
         M = self._M
         M.zeroEntries()
-        fem_petsc.assemble_matrix(M, self._mass_form)
+        fem_petsc.assemble_matrix(M, mass_form)
         M.assemble()
         d = M.getDiagonal()
         diag = d.getArray(readonly=True).copy()
-        total = self.comm.allreduce(fem.assemble_scalar(self._area_form), op=MPI.SUM)
+        total = self.comm.allreduce(fem.assemble_scalar(area_form), op=MPI.SUM)
         sdiag = self.comm.allreduce(float(diag.sum()), op=MPI.SUM)
         d.destroy()
         return diag * (total / sdiag)
@@ -574,8 +613,9 @@ class LagrangeContact:
 
     # ------------------------------------------------------------------ solve
     def _evaluate(self, xv: PETSc.Vec, f: PETSc.Vec, pairs, lam, bc_rows, bc_vals, free):
-        """Residual of the bordered system at ``xv``: (r_u, gap, terms, |r_u free|, max|gap|,
-        max|bc error|), all norms reduced over ranks."""
+        """Residual of the bordered system at ``xv``: (r_u, constraint residual (the gaps,
+        with the tissue's give on a compliant body), terms, |r_u free|, its max, max|bc
+        error|, merit), all norms reduced over ranks."""
         n = self.n
         t0 = time.perf_counter()
         self.operator.residual(xv, f)
@@ -583,6 +623,7 @@ class LagrangeContact:
         xa = xv.getArray(readonly=True)
         x = self.X + xa[: 3 * n].reshape(-1, 3)
         gap, nrm, force, col, kt_blocks, fr = self._contact_terms(x, pairs, lam)
+        gap = self._constraint(gap, pairs, lam)
         nodes = pairs // self.nb
         self.timers["assembly"] += t1 - t0
         self.timers["contact"] += time.perf_counter() - t1
@@ -647,7 +688,10 @@ class LagrangeContact:
             slot_col, slot_row = np.zeros((ns, 3)), np.zeros((ns, 3))
             slot_blocks = np.zeros((ns, 3, 3))
             slot_col[where], slot_row[where], slot_blocks[where] = col, -nrm, kt_blocks
-            B = kkt.update(self._K, slot_col, slot_row, slot_blocks, in_use)
+            slot_diag = np.zeros(ns)  # d(constraint)/d(lam): minus the tissue's compliance
+            if self._compliance is not None:
+                slot_diag[where] = -self._compliance[nodes // self.nb]
+            B = kkt.update(self._K, slot_col, slot_row, slot_blocks, in_use, slot_diag)
             t2 = time.perf_counter()
             self.timers["assembly"] += t1 - t0
             self.timers["contact"] += t2 - t1
@@ -740,7 +784,10 @@ class LagrangeContact:
         # predictor: activate the nodes that the prescribed motions made penetrate (on their
         # most penetrated ellipsoid; see changes_of)
         g0 = self._gaps(positions(xv))
-        if n and self.nb:
+        compliant = self._compliance is not None
+        if n and self.nb and compliant:  # every penetrating pair is a constraint of its own
+            active |= can_touch & (g0 < -self.gap_tol)
+        elif n and self.nb:
             k0 = np.argmin(g0, axis=1)
             new = can_touch[:, 0] & ~active.any(axis=1) & (g0[np.arange(n), k0] < -self.gap_tol)
             active[np.flatnonzero(new), k0[new]] = True
@@ -761,6 +808,11 @@ class LagrangeContact:
                 float(np.max(np.abs(lam_a))) if len(lam_a) else 0.0, op=MPI.MAX
             )
             drop = active & (lam_all.reshape(n, self.nb) < -p.multiplier_tolerance * lam_max)
+            if compliant:  # each pair on its own: the tissue under it gives way
+                add = can_touch & ~active & (gap < -self.gap_tol)
+                drop &= ~frozen
+                add |= frozen & ~active
+                return drop, add, self.comm.allreduce(int(drop.sum() + add.sum()), op=MPI.SUM)
             # one constraint per node, on its most penetrated ellipsoid (the union rule), but
             # chosen between Newton solves only: within a solve the body is fixed (a union
             # projection switching body at every iterate makes Newton cycle in the crease),
@@ -864,7 +916,13 @@ class LagrangeContact:
         self._last_friction_pairs = friction
         self._last_friction = friction.reshape(n, self.nb, 3).sum(axis=1)
         self.dissipation_total += diss
-        d = diagnostics(gap.ravel(), lam_pairs, active=active.ravel())
+        # on a compliant body the penetration past the tissue's give counts (lam = 0 off
+        # the active set); the give itself is the indentation
+        give = np.zeros(n * self.nb)
+        if compliant:
+            give = np.repeat(self._compliance, self.nb) * lam_pairs
+        d = diagnostics(gap.ravel() + give, lam_pairs, active=active.ravel())
+        indent = self.comm.allreduce(float(np.max(give, initial=0.0)), op=MPI.MAX)
         n_act = self.comm.allreduce(int(active.any(axis=1).sum()), op=MPI.SUM)
         pen = self.comm.allreduce(d.max_penetration, op=MPI.MAX)
         lmin = self.comm.allreduce(d.min_multiplier if d.n_active else np.inf, op=MPI.MIN)
@@ -884,6 +942,7 @@ class LagrangeContact:
             diss,
             total,
             time.perf_counter() - t0,
+            max_indentation=indent,
         )
 
     def advance(

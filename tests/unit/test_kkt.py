@@ -59,16 +59,16 @@ def _global_order(start, ms):
     return fab, lam
 
 
-def _expected(dense, start, nodes, col, row, blocks, bc, active):
+def _expected(dense, start, nodes, col, row, blocks, bc, active, diag):
     """The dense twin on the gathered data, permuted to the bordered global numbering."""
     ms = COMM.allgather(len(nodes))
     fab, lam = _global_order(start, ms)
-    g = [np.concatenate(COMM.allgather(a)) for a in (col, row, blocks, active)]
+    g = [np.concatenate(COMM.allgather(a)) for a in (col, row, blocks, active, diag)]
     urows = np.concatenate(
         [start[q] + 3 * nq[:, None] + np.arange(3) for q, nq in enumerate(COMM.allgather(nodes))]
     )
     g_bc = np.concatenate([start[q] + b for q, b in enumerate(COMM.allgather(bc))])
-    ref = bordered_dense(dense, urows, *g[:3], g_bc, g[3])
+    ref = bordered_dense(dense, urows, *g[:3], g_bc, g[3], g[4])
     perm = np.concatenate([fab, lam])
     expect = np.zeros_like(ref)
     expect[np.ix_(perm, perm)] = ref
@@ -90,11 +90,12 @@ def test_bordered_matrix_matches_dense_twin(repeat_node: bool) -> None:
     bc = np.array([3 * n_own + 1, 0], dtype=np.int32) if COMM.rank == 0 else np.zeros(0, np.int32)
     active = np.ones(m, dtype=bool)
     active[-1] = False  # a slot not in use: identity row
+    diag = -rng.uniform(0.1, 1.0, size=m)  # compliant constraints (a soft body)
     B = BorderedMatrix(K, nodes, bc)
-    A = B.update(K, col, row, blocks, active)
+    A = B.update(K, col, row, blocks, active, diag)
     r0, r1 = A.getOwnershipRange()
     ncol = A.getSize()[1]
-    expect = _expected(dense, start, nodes, col, row, blocks, bc, active)
+    expect = _expected(dense, start, nodes, col, row, blocks, bc, active, diag)
     assert np.array_equal(A.getValues(range(r0, r1), range(ncol)), expect[r0:r1])
     # the LU of the same matrix object follows new values (factorisation refreshed, the
     # symbolic analysis reused): solve, update, solve again, against NumPy
@@ -105,12 +106,13 @@ def test_bordered_matrix_matches_dense_twin(repeat_node: bool) -> None:
     ksp.setFromOptions()
     rhs, sol = A.createVecs()
     rhs.set(1.0)
-    for salt, scale, on in ((0.3, 1.0, active), (1.1, 2.0, ~active)):
+    rigid = np.zeros(m)
+    for salt, scale, on, d in ((0.3, 1.0, active, diag), (1.1, 2.0, ~active, rigid)):
         K2, dense2, _, _ = _fabric_tangent(salt)
-        assert B.update(K2, scale * col, row, blocks, on) is A
+        assert B.update(K2, scale * col, row, blocks, on, None if d is rigid else d) is A
         ksp.setOperators(A)
         ksp.solve(rhs, sol)
-        expect = _expected(dense2, start, nodes, scale * col, row, blocks, bc, on)
+        expect = _expected(dense2, start, nodes, scale * col, row, blocks, bc, on, d)
         x = np.linalg.solve(expect, np.ones(len(expect)))
         assert np.allclose(sol.getArray(), x[r0:r1], rtol=1e-10, atol=1e-12)
     ksp.destroy()
@@ -125,3 +127,7 @@ def test_dense_twin_is_the_textbook_saddle_point_matrix() -> None:
     assert A.shape == (11, 11)
     assert np.array_equal(A[3:6, 10], np.ones(3)) and np.array_equal(A[10, 3:6], 2 * np.ones(3))
     assert A[10, 10] == 0.0 and A[0, 0] == 1.0 and not A[0, 1:].any()
+    soft = bordered_dense(
+        K, np.array([[3, 4, 5]]), one, 2 * one, np.zeros((1, 3, 3)), np.array([0]), None, [-0.5]
+    )
+    assert soft[10, 10] == -0.5 and np.array_equal(soft[:10, :10], A[:10, :10])

@@ -69,6 +69,7 @@ def _kkt_ok(rec, total: float) -> None:
         ({"max_newton": 0}, "max_newton"),
         ({"max_active_set": 2.5}, "max_active_set"),
         ({"newton_stall_limit": 0}, "newton_stall_limit"),
+        ({"tissue_stiffness": 0.0}, "tissue_stiffness"),
         ({"prefix": ""}, "prefix"),
     ],
 )
@@ -160,6 +161,46 @@ def test_union_rule_inner_ellipsoid_is_ignored():
     s, e_tt = RB / R0, 0.5 * ((RB / R0) ** 2 - 1.0)
     _kkt_ok(rec, rec.total_normal_force)
     assert rec.total_normal_force == pytest.approx(2 * math.pi * L0 * T * s * E * e_tt, rel=0.01)
+
+
+def test_sleeve_on_soft_cylinder_closed_form():
+    """The same sleeve (nu = 0) pushed over a cylinder whose surface gives way as a Winkler
+    foundation of modulus k_w (contact.tissue_stiffness): it settles at the radius r where
+    the tissue's force equals the membrane's.
+
+    Closed form: the uniform hoop stretch s = r / R0 gives the summed normal force
+    F(r) = 2 pi L0 t s E E_tt (previous test, nu = 0) and the tissue, indented by
+    Rb - r under every node (force per node k_w A_i (Rb - r), A_i the undeformed area),
+    pushes with k_w 2 pi R0 L0 (Rb - r); r solves F(r) = k_w 2 pi R0 L0 (Rb - r). k_w is
+    chosen so that the sleeve sinks by about half of Rb - R0.
+    """
+    from scipy.optimize import brentq
+
+    kw = 5e5  # Pa/m
+    supports = [
+        Prescribed("shoulder", displacement=(0.0, 0.0, 0.0), components=(0,)),
+        Prescribed(_point((0.0, R0, 0.0)), displacement=(0.0, 0.0, 0.0), components=(2,)),
+    ]
+    model = _sleeve(0.0, supports)
+    params = LagrangeContactParameters(tissue_stiffness=kw)
+    contact = LagrangeContact(model, [_cylinder_body()], params=params)
+    rec = _expand(contact)[-1]
+
+    def membrane(r: float) -> float:
+        s = r / R0
+        return 2 * math.pi * L0 * T * s * E * 0.5 * (s * s - 1.0)
+
+    r = brentq(lambda r: membrane(r) - kw * 2 * math.pi * R0 * L0 * (RB - r), R0, RB)
+    assert 0.3 < (RB - r) / (RB - R0) < 0.7  # the tissue's give is half the problem
+    assert rec.n_active == 32 * 9
+    assert rec.total_normal_force == pytest.approx(membrane(r), rel=0.01)
+    assert rec.max_indentation == pytest.approx(RB - r, rel=0.01)
+    # the constraint with the give holds to round-off (gap + lam / (k_w A) = 0)
+    assert rec.max_penetration <= 1e-6 * T and rec.complementarity <= 1e-6 * T * membrane(r)
+    rad = np.linalg.norm(contact.state().x[:, 1:], axis=1)
+    lo = COMM.allreduce(float(rad.min()) if len(rad) else np.inf, op=MPI.MIN)
+    hi = COMM.allreduce(float(rad.max()) if len(rad) else -np.inf, op=MPI.MAX)
+    assert lo == pytest.approx(r, rel=1e-3) and hi == pytest.approx(r, rel=1e-3)
 
 
 # ----------------------------------------------------------------------------- friction
