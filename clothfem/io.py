@@ -264,7 +264,10 @@ class ResultWriter:
         if keep_rows is not None and self.comm.rank == 0:
             with open(self.csv_path, newline="") as fh:
                 reader = csv.DictReader(fh)
-                fields, rows = reader.fieldnames, list(reader)[:keep_rows]
+                fields, rows = list(reader.fieldnames or ()), list(reader)[:keep_rows]
+            if self._standard:  # today's columns (a history written before a column was
+                # added gets it, empty in its old rows), and any old column kept
+                fields = [*self.columns, *(f for f in fields if f not in self.columns)]
             self._csv = open(self.csv_path, "w", newline="")  # noqa: SIM115
             self._writer = csv.DictWriter(self._csv, fieldnames=fields)
             self._writer.writeheader()
