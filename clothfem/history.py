@@ -28,6 +28,12 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("torque_z", "N m", "Eq. 28 torque about the joint centre, z"),
     ("torque_mag", "N m", "|tau| of Eq. 28"),
     ("torque_flex", "N m", "tau . hinge axis"),
+    (
+        "torque_flex_pinched",
+        "N m",
+        "implicit, two or more segments: the part of torque_flex from fabric nodes pressed "
+        "by two segments at once (fabric pinched where the segments meet)",
+    ),
     ("resultant_x", "N", "resultant of the contact forces on the body, x"),
     ("resultant_y", "N", "resultant of the contact forces on the body, y"),
     ("resultant_z", "N", "resultant of the contact forces on the body, z"),

@@ -69,7 +69,7 @@ from .scene_body import (
 from .shell import ShellModel
 from .spec import Scene
 from .static import SolverDivergence
-from .torque_measure import torque_segment_index
+from .torque_measure import pinched, torque_segment_index
 from .torque_table import TorqueTable
 from .torque_table import append as append_torques
 from .torque_table import keep_rows as keep_torque_rows
@@ -779,7 +779,10 @@ class _Run:
         )
         if data is not None:
             self.work.restore(data)
-        self.local = np.zeros(7)  # this rank's torque (3), resultant (3), flexion of the row
+        # this rank's torque (3), resultant (3), flexion and its pinched part of the row
+        self.local = np.zeros(8)
+        # per-pair forces (implicit) on two or more segments: a node can press on two at once
+        self.pinch = not integ.impulsive and len(scene.body) > 1
         self.k = 0  # steps in the row
         self.pressure = None  # Pa, nodal (multipliers / reference lumped area)
         if scene.body:
@@ -834,28 +837,33 @@ class _Run:
         self.local[:3] += tau
         self.local[3:6] += f.force_on_body.sum(axis=0)
         self.local[6] += flex
+        if self.pinch and f.nodes is not None and len(f.nodes):
+            two = pinched(f.nodes)
+            _, flex_p = m.local(t=info.time, x=f.x, force_on_body=f.force_on_body * two[:, None],
+                                body=f.body, fixed=fixed)  # fmt: skip
+            self.local[7] += flex_p
         if self.table is not None:
             self.table.add(
                 t=info.time, x=f.x, force_on_body=f.force_on_body, body=f.body, nodes=f.nodes
             )
         self.work.add(t=info.time, dt=info.dt, forces=f)
 
-    def _reduce(self) -> tuple[np.ndarray, np.ndarray, float, int, np.ndarray]:
-        """The row's torque, resultant and flexion (means over its steps), its step count and
-        the joint work's reduced parts (one reduction per row)."""
+    def _reduce(self) -> tuple[np.ndarray, np.ndarray, float, float, int, np.ndarray]:
+        """The row's torque, resultant, flexion and its pinched part (means over its steps),
+        its step count and the joint work's reduced parts (one reduction per row)."""
         sums = np.concatenate([self.local, self.work.local])
         self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
         k, self.k = self.k, 0
         self.local[:] = 0.0
         tau, res, flex = sums[:3] / k, sums[3:6] / k, float(sums[6]) / k
-        return tau, res, flex, k, sums[7:]
+        return tau, res, flex, float(sums[7]) / k, k, sums[8:]
 
     def _row(self, info: StepInfo, writer: ResultWriter, progress: Progress) -> None:
         t, c, o = info.time, self.c, self.scene.output
         frame = (c.row + 1) % o.every == 0 or t >= self.plan.t_end - 1e-12  # and the last
         integ_row = self.integ.row(frame=frame)  # collective
         c.row += 1
-        tau, res, flex, k, work_parts = self._reduce()
+        tau, res, flex, flex_pinched, k, work_parts = self._reduce()
         work = self.work.close_row(work_parts, t)
         if self.table is not None:
             rows = self.table.rows(comm=self.comm, steps=k, increment=c.row, time=t)
@@ -873,6 +881,7 @@ class _Run:
             "dt": info.dt,
             "angle_deg": angle,
             **torque_columns(tau, res, flex),
+            **({"torque_flex_pinched": flex_pinched} if self.pinch else {}),
             **({"substeps": k} if self.integ.impulsive else {}),
             **yarn_strain_columns(self.model),
             "joint_work": work,

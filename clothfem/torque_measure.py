@@ -114,6 +114,15 @@ class TorqueMeasure:
         return tau, float(tau @ self.axis_at(t))
 
 
+def pinched(nodes: NDArray[np.integer]) -> NDArray[np.bool_]:
+    """Mask of the (node, body) pairs whose node (index array ``nodes``, one entry per pair)
+    is in two or more pairs: fabric pressed by two segments at once."""
+    nodes = np.asarray(nodes)
+    if not len(nodes):
+        return np.zeros(0, dtype=bool)
+    return (np.bincount(nodes) > 1)[nodes]
+
+
 def torque_segment_index(scene: Scene) -> int | None:
     """Index of the torque segment: ``contact.torque_segment`` (a hinge or a recorded
     segment), else the first hinge; None if there is none."""

@@ -11,7 +11,7 @@ from clothfem.body.gait_repeat import gait_cycle
 from clothfem.body.lower_body import read_gait_events
 from clothfem.scene_body import body_motions, contact_log, recorded_events
 from clothfem.spec import Scene
-from clothfem.torque_measure import TorqueMeasure, torque_measure
+from clothfem.torque_measure import TorqueMeasure, pinched, torque_measure
 
 SETTLE = 0.1
 
@@ -183,3 +183,9 @@ def test_recording_placement_keeps_the_recorded_coordinates():
     data["body"][0]["centre"] = [0.0, 0.0, 0.0]
     with pytest.raises(scenes.SceneError, match=r"'body\[0\].centre': is not used with"):
         scenes.validate(data)
+
+
+def test_pinched_pairs_are_the_nodes_on_two_bodies():
+    nodes = np.array([4, 7, 4, 2, 9, 9, 9])
+    assert pinched(nodes).tolist() == [True, False, True, False, True, True, True]
+    assert pinched(np.zeros(0, dtype=int)).shape == (0,)
