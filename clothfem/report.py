@@ -405,6 +405,26 @@ def _stopped_note(h: dict[str, np.ndarray], summary: dict) -> str:
     return f" (stopped at {angle:.1f} deg)"
 
 
+# --y of plot_runs: the history columns (the first, minus the others) and the axis label
+PLOT_Y: dict[str, tuple[tuple[str, ...], str]] = {
+    "torque_mag": (("torque_mag",), "torque |tau| [N m]"),
+    "torque_flex": (("torque_flex",), "torque -tau . flexion axis [N m]"),
+    "torque_flex_unpinched": (
+        ("torque_flex", "torque_flex_pinched"),
+        "torque -tau . flexion axis without the pinched fabric [N m]",
+    ),
+}
+
+
+def plotted(h: dict[str, np.ndarray], *, y: str, x: str) -> tuple[np.ndarray, np.ndarray]:
+    """The (x, y) points :func:`plot_runs` draws of a history: angle [deg] or time [s]
+    against the torque of ``y`` (a key of :data:`PLOT_Y`) [N m]."""
+    columns = [torque_curve(h, col)[1] for col in PLOT_Y[y][0]]
+    t = columns[0] if y == "torque_mag" else -(columns[0] - sum(columns[1:]))
+    angle, time_s = torque_curve(h, "time")
+    return (time_s if x == "time" else angle), t
+
+
 def plot_runs(
     run_dirs: Sequence[str | Path],
     out: str | Path | None = None,
@@ -418,11 +438,13 @@ def plot_runs(
     with the first run's gait events of ``events.csv`` marked), one line per run folder;
     returns the PNG written.
 
-    ``y = "torque_flex"`` plots -tau . flexion axis. Default ``out``:
-    ``RUN_DIR/torque_angle.png`` for one run, ``./torque_angle_compare.png`` for several.
+    ``y = "torque_flex"`` plots -tau . flexion axis; ``"torque_flex_unpinched"`` the same
+    without the part of the fabric pinched between two segments (``torque_flex_pinched``).
+    Default ``out``: ``RUN_DIR/torque_angle.png`` for one run,
+    ``./torque_angle_compare.png`` for several.
     """
-    if y not in ("torque_mag", "torque_flex"):
-        raise ReportError(f"--y must be torque_mag or torque_flex, not {y!r}")
+    if y not in PLOT_Y:
+        raise ReportError(f"--y must be one of {', '.join(PLOT_Y)}, not {y!r}")
     if x not in ("angle", "time"):
         raise ReportError(f"--x must be angle or time, not {x!r}")
     if labels and len(labels) != len(run_dirs):
@@ -430,13 +452,12 @@ def plot_runs(
     runs = []
     for i, d in enumerate(run_dirs):
         h = read_history(Path(d) / "history.csv")
-        if y not in h:
-            raise ReportError(f"{Path(d) / 'history.csv'}: missing column {y!r}")
-        a, t = torque_curve(h, y)
-        if x == "time":
-            a = torque_curve(h, "time")[1]
+        for col in PLOT_Y[y][0]:
+            if col not in h:
+                raise ReportError(f"{Path(d) / 'history.csv'}: missing column {col!r}")
+        a, t = plotted(h, y=y, x=x)
         name = labels[i] if labels else Path(d).resolve().name
-        runs.append((a, -t if y == "torque_flex" else t, name + _stopped_note(h, read_summary(d))))
+        runs.append((a, t, name + _stopped_note(h, read_summary(d))))
     if out is None:
         out = Path(run_dirs[0]) / "torque_angle.png" if len(run_dirs) == 1 else None
         out = out or Path("torque_angle_compare.png")
@@ -453,9 +474,7 @@ def plot_runs(
     if x == "time":
         mark_events(ax, _events(run_dirs[0]))
     ax.set_xlabel("flexion angle [deg]" if x == "angle" else "time [s]")
-    ax.set_ylabel(
-        "torque -tau . flexion axis [N m]" if y == "torque_flex" else "torque |tau| [N m]"
-    )
+    ax.set_ylabel(PLOT_Y[y][1])
     ax.set_title(title or (runs[0][2] if len(runs) == 1 else f"torque-{x}"))
     ax.grid(True)
     ax.legend()

@@ -156,6 +156,23 @@ def test_plot_one_run_default_path(tmp_path, capsys):
     assert R._stopped_note({}, {"completed": True}) == ""
 
 
+def test_plotted_torque_without_the_pinched_fabric(tmp_path, capsys):
+    h = {
+        "stage": np.array(["settle", "motion", "motion"]),
+        "angle_deg": np.array([0.0, 10.0, 20.0]),
+        "time": np.array([0.2, 0.3, 0.4]),
+        "torque_flex": np.array([-0.1, -2.0, -5.0]),
+        "torque_flex_pinched": np.array([0.0, -1.5, -4.0]),
+    }
+    a, t = R.plotted(h, y="torque_flex_unpinched", x="angle")
+    assert a.tolist() == [0.0, 10.0, 20.0] and t == pytest.approx([0.1, 0.5, 1.0])
+    assert R.plotted(h, y="torque_flex", x="time")[0].tolist() == [0.2, 0.3, 0.4]
+    d = _run(tmp_path / "r")  # a history without torque_flex_pinched
+    assert main(["plot", str(d), "--y", "torque_flex_unpinched"]) == 2
+    err = capsys.readouterr().err
+    assert "missing column 'torque_flex_pinched'" in err and err.count("\n") == 1
+
+
 def test_plot_compare_in_cwd(tmp_path, monkeypatch, capsys):
     a, b = _run(tmp_path / "a"), _run(tmp_path / "b", summary={"completed": False})
     monkeypatch.chdir(tmp_path)
