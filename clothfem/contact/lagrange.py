@@ -599,7 +599,8 @@ class LagrangeContact:
         col = -nrm.copy()
         # curvature of the constraint: d(lam n)/dx = lam W (I + gap W)^-1 P with W the
         # Weingarten map of the body at p; its negative enters the tangent
-        blocks = -lam[:, None, None] * _weingarten(point, nrm, gap, body, self.bodies)
+        dndx = _weingarten(point, nrm, gap, body, self.bodies)
+        blocks = -lam[:, None, None] * dndx
         fr = None
         if self._friction is not None:
             fr = self._friction.evaluate(
@@ -607,7 +608,12 @@ class LagrangeContact:
             )
             force = force + fr.force
             col = col - fr.dforce_dlam
-            blocks = blocks + fr.tangent
+            # the friction law sees the closest point p: dp/dx = (I + gap W)^-1 P = P - gap
+            # dn/dx, which matters for a node inside a compliant body (gap = -lam c); with
+            # P alone Newton converged only linearly there (rate 0.92-0.97 per iteration)
+            P = np.eye(3)[None] - nrm[:, :, None] * nrm[:, None, :]
+            dpdx = P - gap[:, None, None] * dndx
+            blocks = blocks + np.einsum("nij,njk->nik", fr.tangent, dpdx)
         kt_blocks = blocks
         return gap, nrm, force, col, kt_blocks, fr
 

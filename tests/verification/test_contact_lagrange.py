@@ -341,3 +341,42 @@ def test_body_dragging_fabric_with_friction_keeps_kkt_and_coulomb_cone():
     assert contact.dissipation_total > 0.0
     res = contact.resultant()
     assert res[0] < 0.0 and res[2] < 0.0  # dragged along +x: fabric holds the body back
+
+
+@pytest.mark.parametrize("depth", [0.0, 5e-3])
+def test_contact_tangent_taylor(depth):
+    """The contact terms' tangent (curvature and friction, stick and slip) is the derivative
+    of the force on the fabric: |f(x + h dx) - f(x) + h K_t dx| = O(h^2), for nodes on the
+    body (rigid) and 5 mm inside it (the give of a compliant body)."""
+    model = _sleeve(0.0, [])
+    rb = R0 + depth
+    body = (np.array([L0 / 2, 0.0, 0.0]), np.eye(3), np.array([LBIG, rb, rb]))
+    params = LagrangeContactParameters(mu=0.3, tangential_penalty=1e4)
+    contact = LagrangeContact(model, [body], params=params)
+    n = contact.n
+    rng = np.random.default_rng(3 + COMM.rank)
+    x0 = contact.X.copy()
+    contact.friction.commit(x0, contact.bodies, np.zeros((n, 3)))  # anchors under each node
+    pairs = np.arange(n)  # node i against the one body
+    lam = rng.uniform(0.5, 1.5, n)  # N
+    # tangential offsets from the anchors, well inside (every other node: stick) or well
+    # outside (slip) the cone |k_t du| = mu lam, so that no pair switches along h dx
+    radial = x0 * np.array([0.0, 1.0, 1.0])
+    radial /= np.linalg.norm(radial, axis=1)[:, None]
+    t = rng.normal(size=(n, 3))
+    t -= np.sum(t * radial, axis=1)[:, None] * radial
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    cone = params.mu * lam / params.tangential_penalty  # m
+    x = x0 + (np.where(np.arange(n) % 2, 3.0, 0.3) * cone)[:, None] * t
+    dx = rng.normal(size=(n, 3)) * 1e-4
+    _, _, f0, _, blocks, fr = contact._contact_terms(x, pairs, lam)
+    if n:
+        assert fr.stick.any() and (~fr.stick).any()
+    kdx = np.einsum("nij,nj->ni", blocks, dx)
+    errs = []
+    for h in (4e-2, 2e-2, 1e-2, 5e-3):
+        fh = contact._contact_terms(x + h * dx, pairs, lam)[2]
+        errs.append(np.sum((fh - f0 + h * kdx) ** 2))
+    errs = [math.sqrt(COMM.allreduce(e, op=MPI.SUM)) for e in errs]
+    orders = [math.log2(errs[i] / errs[i + 1]) for i in range(len(errs) - 1)]
+    assert min(orders) > 1.8, orders
