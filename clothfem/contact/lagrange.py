@@ -53,7 +53,8 @@ carried with the body, ``c_k + Q_k xi_i``, and put back on the possibly resized 
 trial force ``f_tr = P_t f_old - k_t du`` and
 :func:`~clothfem.contact.friction.coulomb_return_map` (stick if ``|f_tr| <= mu lam``, else
 ``f_t = mu lam f_tr/|f_tr|``).  Consistent tangent: stick ``K_t = k_t P_t``; slip
-``K_t = mu lam k_t / |f_tr| (I - s s^T) P_t`` and the extra coupling ``-mu s`` in the multiplier
+``K_t = mu lam k_t / |f_tr| (I - s s^T) P_t``, both times ``dp/dx = P_t - gap dn/dx`` (a node
+inside a compliant body), and the extra coupling ``-mu s`` in the multiplier
 column (``s = f_tr / |f_tr|``), which makes the bordered matrix unsymmetric (MUMPS LU).  In full
 slip ``|f_t| = mu lam`` exactly whatever ``k_t``; ``k_t`` only sets the elastic (pre-sliding)
 slip ``|f_t| / k_t`` while sticking.  The frictional dissipation of a step is
