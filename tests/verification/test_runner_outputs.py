@@ -5,6 +5,7 @@ and VTK's readers, and the scenes without a hinge (a free drape, a motion-captur
 from their files alone."""
 
 import csv
+import json
 import math
 import os
 import shutil
@@ -694,3 +695,34 @@ def test_newmark_free_drape_resumes_bit_for_bit(tmp_path):
     kept = _run_keeping_checkpoints(scene, base / "reference", (2,))
     _resume_from(base / "reference", kept[2], base / "resumed", scene)
     _same_history(_rows(base / "reference"), _rows(base / "resumed"))
+
+
+def test_soft_tissue_tends_to_the_rigid_body(tmp_path):
+    """contact.tissue_stiffness: the Newmark arm's torque tends to the rigid body's as
+    k_w grows, as 1 / k_w (the give lam / (k_w A) is the only change to the constraints);
+    the history reports the give and the log says the body is soft."""
+    base = _shared(tmp_path)
+    data = scenes.apply_overrides(
+        scenes.remove_keys(tomllib.loads(CI.read_text()), UNSET_STATIC), NEWMARK
+    )
+    runs = {}
+    for kw in (None, 1e7, 1e8):
+        sets = [] if kw is None else [f"contact.tissue_stiffness={kw:g}"]
+        scene = scenes.validate(scenes.apply_overrides(data, sets), base=CI.parent)
+        out = base / f"kw{kw}"
+        run_scene(scene, out, comm=COMM)
+        if COMM.rank == 0:
+            built = json.loads((out / "summary.json").read_text())["built"]
+            assert any("soft tissue" in line for line in built) == (kw is not None)
+            runs[kw] = _rows(out)
+    if COMM.rank == 0:
+        rigid = np.array([float(r["torque_flex"]) for r in runs[None]])
+        assert all(r["tissue_indentation"] == "" for r in runs[None])
+        diff = {}
+        for kw in (1e7, 1e8):
+            give = np.array([float(r["tissue_indentation"]) for r in runs[kw]])
+            assert give.max() > 0 and np.all(give >= 0)
+            tau = np.array([float(r["torque_flex"]) for r in runs[kw]])
+            diff[kw] = np.max(np.abs(tau - rigid)) / np.max(np.abs(rigid))
+        assert 0 < diff[1e8] < 1e-2
+        assert diff[1e7] / diff[1e8] == pytest.approx(10.0, rel=0.3)  # first order in 1 / k_w
