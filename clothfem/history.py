@@ -31,7 +31,7 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     (
         "torque_flex_pinched",
         "N m",
-        "implicit, two or more segments: the part of torque_flex from fabric nodes pressed "
+        "newmark, two or more segments: the part of torque_flex from fabric nodes pressed "
         "by two segments at once (fabric pinched where the segments meet)",
     ),
     ("resultant_x", "N", "resultant of the contact forces on the body, x"),
