@@ -453,8 +453,9 @@ def plot_runs(
     for i, d in enumerate(run_dirs):
         h = read_history(Path(d) / "history.csv")
         for col in PLOT_Y[y][0]:
-            if col not in h:
-                raise ReportError(f"{Path(d) / 'history.csv'}: missing column {col!r}")
+            if col not in h or not np.isfinite(h[col]).any():
+                why = "missing column" if col not in h else "no values in column"
+                raise ReportError(f"{Path(d) / 'history.csv'}: {why} {col!r}")
         a, t = plotted(h, y=y, x=x)
         name = labels[i] if labels else Path(d).resolve().name
         runs.append((a, t, name + _stopped_note(h, read_summary(d))))

@@ -171,6 +171,11 @@ def test_plotted_torque_without_the_pinched_fabric(tmp_path, capsys):
     assert main(["plot", str(d), "--y", "torque_flex_unpinched"]) == 2
     err = capsys.readouterr().err
     assert "missing column 'torque_flex_pinched'" in err and err.count("\n") == 1
+    # an explicit run's history has the column, empty
+    e = _run(tmp_path / "e", columns=[*COLUMNS, "torque_flex_pinched"])
+    assert main(["plot", str(e), "--y", "torque_flex_unpinched"]) == 2
+    err = capsys.readouterr().err
+    assert "no values in column 'torque_flex_pinched'" in err and err.count("\n") == 1
 
 
 def test_plot_compare_in_cwd(tmp_path, monkeypatch, capsys):
