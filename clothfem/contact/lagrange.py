@@ -817,23 +817,21 @@ class LagrangeContact:
             drop = active & (lam_all.reshape(n, self.nb) < -p.multiplier_tolerance * lam_max)
             if compliant:  # each pair on its own: the tissue under it gives way
                 add = can_touch & ~active & (gap < -self.gap_tol)
-                drop &= ~frozen
-                add |= frozen & ~active
-                return drop, add, self.comm.allreduce(int(drop.sum() + add.sum()), op=MPI.SUM)
-            # one constraint per node, on its most penetrated ellipsoid (the union rule), but
-            # chosen between Newton solves only: within a solve the body is fixed (a union
-            # projection switching body at every iterate makes Newton cycle in the crease),
-            # and two constraints on one node with nearly parallel normals make the bordered
-            # matrix nearly singular
-            worst = np.argmin(gap, axis=1) if self.nb else np.zeros(n, dtype=np.intp)
-            gmin = gap[np.arange(n), worst] if self.nb else np.zeros(n)
-            onehot = np.zeros_like(active)
-            onehot[np.arange(n), worst] = True
-            penetrating = can_touch[:, 0] & (gmin < -self.gap_tol)
-            own = np.where(active, gap, np.inf).min(axis=1) if self.nb else np.zeros(n)
-            move = active.any(axis=1) & penetrating & (gmin < own - self.gap_tol)
-            drop |= active & move[:, None]
-            add = onehot & (penetrating & ~active.any(axis=1) | move)[:, None]
+            else:
+                # one constraint per node, on its most penetrated ellipsoid (the union rule), but
+                # chosen between Newton solves only: within a solve the body is fixed (a union
+                # projection switching body at every iterate makes Newton cycle in the crease),
+                # and two constraints on one node with nearly parallel normals make the bordered
+                # matrix nearly singular
+                worst = np.argmin(gap, axis=1) if self.nb else np.zeros(n, dtype=np.intp)
+                gmin = gap[np.arange(n), worst] if self.nb else np.zeros(n)
+                onehot = np.zeros_like(active)
+                onehot[np.arange(n), worst] = True
+                penetrating = can_touch[:, 0] & (gmin < -self.gap_tol)
+                own = np.where(active, gap, np.inf).min(axis=1) if self.nb else np.zeros(n)
+                move = active.any(axis=1) & penetrating & (gmin < own - self.gap_tol)
+                drop |= active & move[:, None]
+                add = onehot & (penetrating & ~active.any(axis=1) | move)[:, None]
             # pairs that kept flipping in this step stay active (see the loop below), even
             # where the rule above moved the node to the other ellipsoid: a node pushed into
             # the crease then keeps both constraints
