@@ -720,7 +720,9 @@ class SelfBarrier:
         p = self.params
         c = self.candidates
         if c is None or not all(self._valid(c, x) for x in xs):
-            skin = max(p.skin_length, 8.0 * span)
+            # built at xs[0], every node of xs[1:] within span of it: valid there by the
+            # motion bound of CandidateList.valid, with room for the next iterates
+            skin = max(p.skin_length, 2.5 * span)
             self.candidates = build_candidates(xs[0], self.surface, distance=p.distance, skin=skin)
             self.rebuilds += 1
         return self.candidates
@@ -765,7 +767,12 @@ class SelfBarrier:
     # ----------------------------------------------------------------- friction
     def begin_step(self, x: PETSc.Vec, dt: float) -> None:
         """Freeze the layer friction's pairs at the step's start ``x`` for a step of ``dt``
-        [s] (collective; nothing without friction)."""
+        [s] (collective). A candidate list a step filter built wider than the skin is
+        dropped here: it served one Newton step's path, and its size would slow every pair
+        search of the steps after."""
+        c = self.candidates
+        if c is not None and c.skin > self.params.skin_length:
+            self.candidates = None
         if self.params.mu == 0.0:
             return
         t0 = time.perf_counter()

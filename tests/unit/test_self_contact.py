@@ -280,3 +280,27 @@ def test_compiled_narrow_phase_matches_numpy():
     D = rng.normal(size=(400, 3))
     exact = np.max([np.linalg.norm(D[g[:, 0]] - D[g[:, k]], axis=1) for k in (1, 2, 3)], axis=0)
     np.testing.assert_allclose(sc._relative_motion(D, g, 1), exact, rtol=1e-14)
+
+
+def test_candidate_list_motion_bound_is_sound():
+    """Twice the motion radius of the displacements since the build bounds the fall of
+    every pair's distance: two layers 2.1 d apart (no pair listed between them with a skin
+    of d) stay covered while the top one sinks by 0.9 d, and the list is refused once it
+    sinks by 1.15 d, where unlisted pairs are within d (an undoubled radius would pass)."""
+    sm = meshes.strip(MPI.COMM_SELF, length=0.04, width=0.02, nx=4, ny=2)
+    X, cells = sc.mesh_nodes(sm.mesh)
+    n, d = len(X), 1e-3
+    x = np.vstack([X, X + [0.0, 0.0, 2.1 * d]])
+    surf = sc.fabric_surface(np.vstack([cells, cells + n]), n_nodes=2 * n)
+    c = sc.build_candidates(x, surf, distance=d, skin=d)
+    assert not np.any((c.pt_node >= n) != (surf.triangles[c.pt_tri, 0] >= n))
+    for sink, ok in ((0.9 * d, True), (1.15 * d, False)):
+        y = x.copy()
+        y[n:, 2] -= sink
+        assert c._moved_less(y) is ok
+        assert c.valid(y) is ok
+        fresh = sc.build_candidates(y, surf, distance=d, skin=1e-9)
+        across = (fresh.pt_dist < d) & (
+            (fresh.pt_node >= n) != (surf.triangles[fresh.pt_tri, 0] >= n)
+        )
+        assert across.any() is not ok
