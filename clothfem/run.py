@@ -37,6 +37,7 @@ from .errors import RunStopped
 from .history import yarn_strain_columns
 from .io import Progress, ResultWriter, rank0_print, snapshot_png
 from .petsc_options import describe_direct_lu
+from .run_output import resume_problem
 from .runners import run_contact_scene
 from .scene import DECRIMPING_KEYS, SceneError, mesh_file_problem
 from .scene_body import contact_log
@@ -557,6 +558,11 @@ def run_scene(
             "checkpoints)"
         )
     check_output(out, overwrite=overwrite, resume=resume, comm=comm)
+    if resume:
+        msg = resume_problem(scene, out, ranks=comm.size) if comm.rank == 0 else None
+        msg = comm.bcast(msg, root=0)
+        if msg:
+            raise SceneError(msg)
     _check_mesh_file(scene, comm)
     t0 = time.perf_counter()
     donned = _don(scene, out, comm, resume=resume) if scene.initial.don else None

@@ -6,6 +6,8 @@ fails alone)."""
 from __future__ import annotations
 
 import csv
+import fnmatch
+import json
 import os
 import sys
 from collections.abc import Callable, Sequence
@@ -22,7 +24,7 @@ from .report import mark_events
 from .scene import SceneError
 from .scene_body import RunPlan
 from .shell import ShellModel
-from .spec import Scene
+from .spec import SECTIONS, Scene
 from .static import SolverDivergence
 
 __all__ = [
@@ -30,7 +32,9 @@ __all__ = [
     "load_checkpoint",
     "plot_torque_angle",
     "progress_snapshots",
+    "resume_problem",
     "save_checkpoint",
+    "scene_record",
     "stop_with_fields",
     "torque_columns",
     "write_animation",
@@ -170,6 +174,59 @@ def save_checkpoint(out: Path, comm: MPI.Comm, data: dict[str, Any]) -> None:
         np.savez(fh, **data)
     os.replace(tmp, path)  # a run killed while writing keeps the previous checkpoint
     comm.barrier()
+
+
+#: The scene keys a resumed run may set otherwise than the interrupted one: where the run
+#: ends, the smallest time step and what it writes. Any other difference would continue one
+#: run's history with another's physics.
+RESUME_MAY_CHANGE = (
+    "scene.description", "solver.duration", "solver.dt_min", "body.*.angle_max",
+    "output.every", "output.png", "output.frames", "output.checkpoint_every",
+)  # fmt: skip
+#: The checkpoint's entry holding :func:`scene_record` (JSON).
+SCENE_RECORD = "scene_record"
+
+
+def scene_record(scene: Scene) -> dict[str, Any]:
+    """Every key of ``scene`` as ``section.key`` (``section.<i>.key`` for the i-th table of
+    a list such as ``body``, as ``--set`` names them), values as JSON gives them back."""
+    flat: dict[str, Any] = {}
+    for name in SECTIONS:
+        value = getattr(scene, name)
+        tables = enumerate(value) if isinstance(value, tuple) else [(None, value)]
+        for i, table in tables:
+            head = name if i is None else f"{name}.{i}"
+            for key, v in vars(table).items():
+                flat[f"{head}.{key}"] = v
+    return json.loads(json.dumps(flat, default=str))
+
+
+def resume_problem(scene: Scene, out: Path, *, ranks: int) -> str | None:
+    """Why ``scene`` may not resume the interrupted run in ``out`` (one line: the first key
+    it sets otherwise, outside :data:`RESUME_MAY_CHANGE`), or None; None too when the
+    checkpoint of ``ranks`` ranks is missing (:func:`load_checkpoint` says so) or holds no
+    scene record."""
+    path = out / "checkpoint" / f"rank0-of-{ranks}.npz"
+    if not path.is_file():
+        return None
+    with np.load(path) as z:
+        if SCENE_RECORD not in z.files:
+            return None
+        old = json.loads(str(z[SCENE_RECORD]))
+    new = scene_record(scene)
+    for key in [*new, *(k for k in old if k not in new)]:
+        if new.get(key) == old.get(key) or _may_change(key):
+            continue
+        return (
+            f"--resume: scene key '{key}' is {new.get(key)!r} here but {old.get(key)!r} in "
+            f"the interrupted run in '{out}'; a resume may change only "
+            f"{', '.join(RESUME_MAY_CHANGE)} (start a new run for another scene)"
+        )
+    return None
+
+
+def _may_change(key: str) -> bool:
+    return any(fnmatch.fnmatchcase(key, pat) for pat in RESUME_MAY_CHANGE)
 
 
 def load_checkpoint(out: Path, comm: MPI.Comm) -> dict[str, np.ndarray]:

@@ -30,6 +30,7 @@ end; a checkpoint every ``output.checkpoint_every`` rows.
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from collections.abc import Callable
@@ -46,11 +47,13 @@ from .history import yarn_strain_columns
 from .io import Progress, ResultWriter, rank0_print
 from .report import joint_power, joint_work
 from .run_output import (
+    SCENE_RECORD,
     end_together,
     load_checkpoint,
     plot_torque_angle,
     progress_snapshots,
     save_checkpoint,
+    scene_record,
     stop_with_fields,
     torque_columns,
     write_animation,
@@ -768,6 +771,7 @@ class _Run:
         self.scene, self.out, self.model, self.comm = scene, out, model, comm
         self.integ, self.t0, self.check_stop, self.summary = integ, t0, check_stop, summary
         self.n = model.n_owned
+        self.record = np.array(json.dumps(scene_record(scene)))  # checked on --resume
         self.c = _Counters.from_arrays(data) if data is not None else _Counters()
         self.fixed = plan.measure.fixed_mask(integ.X) if plan.measure is not None else None
         self.table = None  # the [[torques]] measures (a body is required by the validation)
@@ -919,6 +923,7 @@ class _Run:
         if self.due:
             self.due = False
             data = {**arrays(), **self.c.arrays(), **self.work.arrays()}
+            data[SCENE_RECORD] = self.record
             save_checkpoint(self.out, self.comm, data)
 
 

@@ -335,6 +335,32 @@ def test_resume_bit_for_bit_from_two_checkpoints(tmp_path, sets, picks):
                 assert np.allclose(a[name], b[name], rtol=0.0, atol=scale), name
 
 
+def test_resume_refuses_another_scene(tmp_path):
+    """A resume whose scene differs from the interrupted run's in a key outside
+    RESUME_MAY_CHANGE (here the friction coefficient) is refused with one line naming the
+    key and both values, before anything is written: the history stays as it was. Where
+    the run ends (the hinge's final angle) and what it writes may change."""
+    from clothfem.run_output import resume_problem
+
+    base = _shared(tmp_path)
+    scene = scenes.load(CI, [*EXPLICIT, "body.1.angle_max=0.5"], unset=UNSET_STATIC)
+    out = base / "run"
+    run_scene(scene, out, comm=COMM)
+    before = (out / "history.csv").read_bytes()
+    other = scenes.load(
+        CI, [*EXPLICIT, "body.1.angle_max=0.5", "contact.mu=0.3"], unset=UNSET_STATIC
+    )
+    with pytest.raises(SceneError) as err:
+        run_scene(other, out, comm=COMM, resume=True)
+    msg = str(err.value)
+    assert "\n" not in msg and "'contact.mu' is 0.3 here but 0.1" in msg, msg
+    assert (out / "history.csv").read_bytes() == before
+    longer = scenes.load(
+        CI, [*EXPLICIT, "body.1.angle_max=0.8", "output.png=false"], unset=UNSET_STATIC
+    )
+    assert resume_problem(longer, out, ranks=COMM.size) is None
+
+
 @pytest.mark.slow
 def test_resume_bit_for_bit_with_self_contact(tmp_path):
     """The arm-sleeve scene (16x20) with fabric self-contact to 50 deg, resumed from the
