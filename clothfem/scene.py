@@ -763,6 +763,16 @@ SCHEMA: dict[str, Section] = {
                 open_lo=True,
                 when=DYNAMIC,
             ),
+            "self_pressure": Key(
+                "float",
+                "the pressure [Pa] two parallel fabric layers exert on each other "
+                "at half the activation distance (the barrier's stiffness: how hard a fold "
+                "squeezed between two bodies resists being pressed thinner)",
+                default=1e3,
+                lo=0.0,
+                open_lo=True,
+                when=NEWMARK,
+            ),
         },
         "contact of the fabric with the body (only built with a [[body]])",
         optional=True,

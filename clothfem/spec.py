@@ -224,6 +224,7 @@ class ContactSpec:
     self_contact: bool
     self_mu: float | None
     self_distance: float | None  # [m]
+    self_pressure: float  # [Pa]
 
 
 @dataclass(frozen=True, kw_only=True)

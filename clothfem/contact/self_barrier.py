@@ -1088,10 +1088,12 @@ class SelfBarrier:
     @classmethod
     def from_scene(cls, system, contact: ContactSpec) -> SelfBarrier | None:
         """From a scene's ``contact`` section: None unless ``self_contact`` is true; the
-        activation distance ``self_distance`` [m] (default: the fabric thickness) and the
-        layer friction ``self_mu`` (default: ``mu``)."""
+        activation distance ``self_distance`` [m] (default: the fabric thickness), the
+        layer friction ``self_mu`` (default: ``mu``) and the pressure ``self_pressure``
+        [Pa] of two layers at half that distance."""
         if not contact.self_contact:
             return None
         d = contact.self_distance or system.model.thickness
         mu = contact.mu if contact.self_mu is None else contact.self_mu
-        return cls(system, params=SelfBarrierParameters(distance=d, mu=mu))
+        params = SelfBarrierParameters(distance=d, mu=mu, pressure=contact.self_pressure)
+        return cls(system, params=params)

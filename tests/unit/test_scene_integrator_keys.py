@@ -51,6 +51,7 @@ DYNAMIC = "integrators 'newmark', 'explicit'"
         ("contact.increments", 4, "explicit", "integrator 'static'"),
         ("contact.settle", True, "newmark", "integrator 'static'"),
         ("contact.self_mu", 0.2, "static", DYNAMIC),
+        ("contact.self_pressure", 2e3, "explicit", "integrator 'newmark'"),
         ("contact.kernel", "numpy", "static", "integrator 'explicit'"),
         ("contact.semismooth_passes", 2, "explicit", "integrator 'newmark'"),
         ("output.interval", 0.01, "newmark", "integrator 'explicit'"),

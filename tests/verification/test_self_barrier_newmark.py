@@ -412,3 +412,23 @@ def test_tube_squashed_flat_between_plates():
     assert recs[-1][1].pairs > 1000
     assert low == pytest.approx(2 * half, rel=1e-6)
     assert recs[-1][0].kinetic_energy < 1e-10
+
+
+def test_scene_keys_set_the_barrier(tmp_path_factory):
+    """contact.self_distance, self_mu and self_pressure reach the barrier a Newmark scene
+    builds (its stiffness kappa = pressure / (c d), c fixed by the barrier's shape); the
+    defaults are the thickness, contact.mu and 1 kPa."""
+    from pathlib import Path
+
+    from clothfem import scene as scenes
+
+    tmp = COMM.bcast(tmp_path_factory.mktemp("keys") if COMM.rank == 0 else None)
+    _, system = clamped_sheets(tmp, z0=3.0 * T)
+    arm = Path(__file__).parents[2] / "demos" / "scenes" / "arm_sleeve.toml"
+    nm = ["solver.integrator='newmark'", "contact.self_contact=true"]
+    default = SelfBarrier.from_scene(system, scenes.load(arm, nm).contact).params
+    sets = ["contact.self_distance=2e-3", "contact.self_mu=0.3", "contact.self_pressure=4e3"]
+    given = SelfBarrier.from_scene(system, scenes.load(arm, nm + sets).contact).params
+    assert (default.distance, default.mu, default.pressure) == (T, 0.1, 1e3)
+    assert (given.distance, given.mu, given.pressure) == (2e-3, 0.3, 4e3)
+    assert given.kappa == pytest.approx(4.0 * default.kappa / 2.0, rel=1e-14)
