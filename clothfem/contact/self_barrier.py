@@ -69,7 +69,10 @@ regions.
 pair crosses (the continuous crossing test of :func:`point_triangle_crossings` /
 :func:`edge_edge_crossings`) and every pair within ``d`` keeps at least ``floor`` times
 its distance; a Newton step moves no node by more than ``max_move d`` (so the candidate
-list covering the path stays local).
+list covering the path stays local). A path the list does not cover gets a list built at
+the iterate with a skin of 2.5 times the path's largest node motion (valid along it: no
+node moves farther); such a widened list is dropped at the next time step's start, so the
+pair searches of later steps do not go through it.
 
 **Parallel layout.** Like the explicit self-contact, every rank gathers all node positions
 (``Allgatherv``), evaluates every pair redundantly (the same bits on every rank) and adds
