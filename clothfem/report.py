@@ -265,6 +265,21 @@ def roughness_trend(
     return roughness(a[ok], line, lo=lo, hi=hi) * float(line.mean()) / float(t[ok].mean())
 
 
+def timer_shares(
+    h: dict[str, np.ndarray], edges: Sequence[float], *, timer: str = "t_self_contact"
+) -> list[tuple[float, float, int, float, float]]:
+    """Per angle bin ``[edges[k], edges[k+1])`` [deg] of the rows of the history ``h`` (the
+    last bin closed): (low edge, high edge, rows, seconds in ``timer``, row wall seconds).
+    A row counts in the bin of its angle; ``wall_time`` is each row's own wall time."""
+    a, t, wall = h["angle_deg"], h[timer], h["wall_time"]
+    out = []
+    for k, (lo, hi) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
+        last = k == len(edges) - 2
+        m = (a >= lo) & ((a <= hi) if last else (a < hi))
+        out.append((lo, hi, int(m.sum()), float(np.nansum(t[m])), float(np.nansum(wall[m]))))
+    return out
+
+
 def joint_power(torque: np.ndarray, omega: np.ndarray) -> np.ndarray:
     """Power [W] a joint spends against the garment: ``-tau . omega``, with ``tau`` [N m] the
     torque the garment exerts on the segment about its joint and ``omega`` [rad/s] the

@@ -290,6 +290,8 @@ class CandidateList:
         )
 
     def _moved_less(self, x: FloatArray) -> bool:
+        """Whether twice the motion radius since the build, with a round-off margin, is
+        below the skin at ``x`` (N, 3) [m]."""
         scale = max(1.0, float(np.max(np.abs(x), initial=0.0)))
         moved = 2.0 * motion_radius(x - self.x_build)
         return moved * (1.0 + 1e-9) + 1e-12 * scale < self.skin

@@ -304,3 +304,16 @@ def test_report_warns_of_a_crushed_yarn(tmp_path, capsys):
     d2 = _run(tmp_path / "plain")
     assert main(["report", str(d2)]) == 0
     assert "yarn" not in capsys.readouterr().out
+
+
+def test_timer_shares_bin_the_rows_by_angle():
+    """Each row counts once, in the bin of its angle (the last bin closed at its top);
+    the sums are the rows' own timer and wall seconds."""
+    h = {
+        "angle_deg": np.array([0.0, 0.0, 10.0, 44.9, 45.0, 60.0, 90.0]),
+        "t_self_contact": np.array([1.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0]),
+        "wall_time": np.array([10.0, 10.0, 10.0, 10.0, 10.0, 10.0, 10.0]),
+    }
+    rows = R.timer_shares(h, [0.0, 45.0, 60.0])
+    assert rows == [(0.0, 45.0, 4, 7.0, 40.0), (45.0, 60.0, 2, 9.0, 20.0)]
+    assert R.timer_shares(h, [0.0, 90.0])[0][2:] == (7, 22.0, 70.0)
