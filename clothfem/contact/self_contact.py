@@ -290,11 +290,10 @@ class CandidateList:
         )
 
     def _moved_less(self, x: FloatArray) -> bool:
-        """Whether twice the motion radius since the build, with a round-off margin, is
-        below the skin at ``x`` (N, 3) [m]."""
-        scale = max(1.0, float(np.max(np.abs(x), initial=0.0)))
+        """Whether twice the motion radius since the build, with the round-off margin of
+        :func:`bound_tolerance`, is below the skin at ``x`` (N, 3) [m]."""
         moved = 2.0 * motion_radius(x - self.x_build)
-        return moved * (1.0 + 1e-9) + 1e-12 * scale < self.skin
+        return moved + bound_tolerance(x, distance=self.skin) < self.skin
 
     def subset(self, pt: IntArray, ee: IntArray) -> CandidateList:
         """The list of the point-triangle pairs ``pt`` and the edge pairs ``ee`` (rows, in
