@@ -116,6 +116,7 @@ from numpy.typing import NDArray
 from petsc4py import PETSc
 
 from ..spec import ContactSpec
+from . import barrier_kernels as bk
 from .self_contact import (
     CandidateList,
     FabricSurface,
@@ -373,27 +374,25 @@ def distance_derivatives(
     ``hessian``) of the pair distances ``s = |sum_j c_j y_j|`` with respect to the four
     nodes' positions ``y`` (M, 4, 3), the closest-point parameters moving along ``free``
     (M, 4, 2) (module docstring)."""
-    m = len(coef)
     r = np.einsum("mj,mjk->mk", coef, y)
     s = np.linalg.norm(r, axis=1)
-    g = (coef[:, :, None] * r[:, None, :]).reshape(m, 12)
+    g = (coef[:, :, None] * r[:, None, :]).reshape(len(coef), 12) / s[:, None]
     if not hessian:
-        return s, g / s[:, None], None
-    XA = np.einsum("mjk,mjl->mkl", y, free)  # (M, 3, 2)
-    W = np.einsum("mkl,mkn->mln", XA, XA)
-    unused = ~np.any(free != 0.0, axis=1)  # (M, 2)
-    W[:, 0, 0] += unused[:, 0]
-    W[:, 1, 1] += unused[:, 1]
-    F = free[:, :, None, :] * r[:, None, :, None] + coef[:, :, None, None] * XA[:, None, :, :]
-    F = F.reshape(m, 12, 2)
-    Hphi = (
-        np.einsum("mj,ml->mjl", coef, coef)[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]
-    )
-    Hphi = Hphi.reshape(m, 12, 12) - (F @ np.linalg.inv(W)) @ F.transpose(0, 2, 1)
-    hess = Hphi  # hess phi / s - grad phi grad phi^T / s^3, in place
-    hess /= s[:, None, None]
-    hess -= np.einsum("mi,mj->mij", g, g) / (s**3)[:, None, None]
-    return s, g / s[:, None], hess
+        return s, g, None
+    one, zero = np.ones(len(s)), np.zeros(len(s))
+    return s, g, _distance_hessians(y, coef, free, one, zero)
+
+
+def _distance_hessians(
+    y: FloatArray, coef: FloatArray, free: FloatArray, a: FloatArray, b: FloatArray
+) -> FloatArray:
+    """``a hess s + b grad s grad s^T`` (M, 12, 12) of the pairs (compiled loop)."""
+    out = np.empty((len(coef), 12, 12))
+    bk.distance_hessians(
+        np.ascontiguousarray(y), np.ascontiguousarray(coef), np.ascontiguousarray(free),
+        np.ascontiguousarray(a, dtype=float), np.ascontiguousarray(b, dtype=float), out,
+    )  # fmt: skip
+    return out
 
 
 def pair_energy(
@@ -402,15 +401,14 @@ def pair_energy(
     """Barrier energy [J], its gradient (M, 12) [N] and Hessian (M, 12, 12) [N/m] per pair
     (None unless ``hessian``), and each pair's force ``-dE/ds`` (M,) [N], at ``x`` (N, 3)
     [m] for the pairs' closest features."""
-    s, gs, hs = distance_derivatives(x[pairs.idx], pairs.coef, pairs.free, hessian=hessian)
+    y = x[pairs.idx]
+    s, gs, _ = distance_derivatives(y, pairs.coef, pairs.free, hessian=False)
     b, db, d2b = barrier(s, distance=params.distance)
     k = params.kappa * pairs.weight
     grad = (k * db)[:, None] * gs
     if not hessian:
         return float(np.sum(k * b)), grad, None, -k * db
-    hess = hs  # k b'' grad s grad s^T + k b' hess s, in place
-    hess *= (k * db)[:, None, None]
-    hess += (k * d2b)[:, None, None] * np.einsum("mi,mj->mij", gs, gs)
+    hess = _distance_hessians(y, pairs.coef, pairs.free, k * db, k * d2b)
     return float(np.sum(k * b)), grad, hess, -k * db
 
 
@@ -539,7 +537,7 @@ def edge_energy(
     and each pair's force ``-dE/ds`` (M,) [N], at ``x`` (N, 3) [m] for the pairs' closest
     features."""
     y = x[pairs.idx]
-    s, gs, hs = distance_derivatives(y, pairs.coef, pairs.free, hessian=hessian)
+    s, gs, _ = distance_derivatives(y, pairs.coef, pairs.free, hessian=False)
     b, db, d2b = barrier(s, distance=params.distance)
     c, gc, _ = cross_derivatives(y, hessian=False)
     ex = pairs.eps_x
@@ -548,21 +546,17 @@ def edge_energy(
     dm = np.where(on, 2.0 / ex - 2.0 * c / (ex * ex), 0.0)
     d2m = np.where(on, -2.0 / (ex * ex), 0.0)
     k = params.kappa * pairs.weight
-    outer = lambda u, w: np.einsum("mi,mj->mij", u, w)  # noqa: E731
     grad = (k * dm * b)[:, None] * gc + (k * mol * db)[:, None] * gs
     if not hessian:
         return float(np.sum(k * mol * b)), grad, None, -k * mol * db
-    # the terms in this order, summed in place; the mollifier's vanish unless a pair is on
-    # (0 + a is a: the same bits without them)
-    h_ss = (k * mol * d2b)[:, None, None] * outer(gs, gs)
-    hess = h_ss
-    if on.any():
-        hc = cross_derivatives(y, hessian=True)[2]
-        hess = (k * d2m * b)[:, None, None] * outer(gc, gc)
-        hess += (k * dm * b)[:, None, None] * hc
-        hess += (k * dm * db)[:, None, None] * (outer(gc, gs) + outer(gs, gc))
-        hess += h_ss
-    hess += (k * mol * db)[:, None, None] * hs
+    hess = _distance_hessians(y, pairs.coef, pairs.free, k * mol * db, k * mol * d2b)
+    if on.any():  # the mollifier's terms, on the pairs near parallel
+        o = np.flatnonzero(on)
+        ko, gco, gso = k[o], gc[o], gs[o]
+        outer = lambda u, w: np.einsum("mi,mj->mij", u, w)  # noqa: E731
+        hess[o] += (ko * d2m[o] * b[o])[:, None, None] * outer(gco, gco)
+        hess[o] += (ko * dm[o] * b[o])[:, None, None] * cross_derivatives(y[o])[2]
+        hess[o] += (ko * dm[o] * db[o])[:, None, None] * (outer(gco, gso) + outer(gso, gco))
     return float(np.sum(k * mol * b)), grad, hess, -k * mol * db
 
 
@@ -632,11 +626,12 @@ def friction_energy(
     grad = ((k * f1y)[:, None, None] * fp.coef[:, :, None] * tu[:, None, :]).reshape(m, 12)
     if not hessian:
         return float(np.sum(k * F)), grad, None
-    A = f1y[:, None, None] * np.eye(2) + cuu[:, None, None] * np.einsum("mi,mj->mij", u, u)
-    B = np.einsum("mkl,mlp,mnp->mkn", fp.basis, A, fp.basis)  # T A T^T (M, 3, 3)
-    cc = np.einsum("mi,mj->mij", fp.coef, fp.coef)
-    hess = k[:, None, None, None, None] * cc[:, :, None, :, None] * B[:, None, :, None, :]
-    return float(np.sum(k * F)), grad, hess.reshape(m, 12, 12)
+    hess = np.empty((m, 12, 12))
+    bk.friction_hessians(
+        np.ascontiguousarray(fp.coef), np.ascontiguousarray(fp.basis),
+        np.ascontiguousarray(u), f1y, cuu, np.ascontiguousarray(k, dtype=float), hess,
+    )  # fmt: skip
+    return float(np.sum(k * F)), grad, hess
 
 
 @dataclass(frozen=True)
@@ -671,7 +666,7 @@ class SelfBarrier:
         vec = system.create_vector()
         start = vec.getOwnershipRange()[0]
         vec.destroy()
-        self.row0 = np.concatenate(self.comm.allgather(start + 3 * np.arange(n)))
+        self.row0 = np.concatenate(self.comm.allgather(start + 3 * np.arange(n, dtype=np.int64)))
         self.candidates: CandidateList | None = None
         self._pattern: tuple | None = None  # (candidate list, K pattern, combined layout)
         # (candidate list, node groups (M, 4)): the blocks the list's patterns hold beyond
@@ -691,7 +686,6 @@ class SelfBarrier:
     _gathered: tuple | None = None
     _valid_at: tuple | None = None
     _chosen: tuple | None = None  # (list, positions, pairs within d there): _selected
-    _slotted: tuple | None = None  # (layout, node groups, own rows, positions): _slots
     _near: tuple | None = None  # (candidate list, its pairs near some positions): _near_list
 
     def _gather(self, a: FloatArray) -> FloatArray:
@@ -827,34 +821,31 @@ class SelfBarrier:
         return parts
 
     def _terms(self, xa: FloatArray, *, hessian: bool) -> tuple:
-        """At positions ``xa``: the energy [J], the node groups (M, 4), gradients (M, 12)
-        and Hessians (M, 12, 12; None unless ``hessian``) of the barrier's pairs
-        (node-triangle, edge-edge) and the friction's, and the barrier's diagnostics (pairs,
+        """At positions ``xa``: the energy [J], per kind of pair (the barrier's node-triangle
+        and edge-edge pairs, the friction's) the node groups (M, 4), gradients (M, 12) and
+        Hessians (M, 12, 12; None unless ``hessian``), and the barrier's diagnostics (pairs,
         smallest distance, energy, force)."""
         p, h = self.params, hessian
-        barrier_parts = self._barrier_parts(xa, hessian=h)
-        (bp, (e, grad, hess, force)), edges = barrier_parts[0], barrier_parts[1:]
-        parts, dist = [(bp.idx, grad, hess)], [bp.dist]
-        for ep, (ee, eg, eh, ef) in edges:
-            e, force = e + ee, np.concatenate([force, ef])
-            parts.append((ep.idx, eg, eh))
-            dist.append(ep.dist)
+        e, parts, dist, force = 0.0, [], [], []
+        for pr, (pe, pg, ph, pf) in self._barrier_parts(xa, hessian=h):
+            e += pe
+            parts.append((pr.idx, pg, ph))
+            dist.append(pr.dist)
+            force.append(pf)
         d = np.concatenate(dist)
-        last = (len(d), float(np.min(d, initial=math.inf)), e, float(force.sum()))
+        last = (len(d), float(np.min(d, initial=math.inf)), e, float(np.concatenate(force).sum()))
         fp = self._fric
         if fp is not None:
             fe, fg, fh = friction_energy(xa, fp, mu=p.mu, eps=self._eps, hessian=h)
             e += fe
             parts.append((fp.idx, fg, fh))
-        if len(parts) == 1:
-            return e, bp.idx, grad, hess, last
-        idx, g = (np.concatenate(a) for a in list(zip(*parts, strict=True))[:2])
-        return e, idx, g, np.concatenate([q[2] for q in parts]) if h else None, last
+        return e, parts, last
 
     def gradient(self, xa: FloatArray) -> FloatArray:
         """dE/dx (N, 3) [N] of the barrier and this step's friction at the positions ``xa``
         (N, 3) [m] of all nodes (the forces on the nodes are its negative)."""
-        _, idx, grad, _, self._last = self._terms(xa, hessian=False)
+        _, parts, self._last = self._terms(xa, hessian=False)
+        idx, grad = (np.concatenate(a) for a in list(zip(*parts, strict=True))[:2])
         n, node, g = self.surface.n_nodes, idx.ravel(), grad.reshape(-1, 3)
         # summed in the pairs' order, as np.add.at would (bincount is its fast form)
         return np.column_stack([np.bincount(node, weights=g[:, k], minlength=n) for k in range(3)])
@@ -867,13 +858,13 @@ class SelfBarrier:
         fa[: 3 * self.n] += G[self.lo : self.lo + self.n].ravel()
         self.wall += time.perf_counter() - t0
 
-    def _layout(self, K: PETSc.Mat, need: IntArray | None = None):
+    def _layout(self, K: PETSc.Mat, kp: IntArray, ki: IntArray, need: IntArray | None = None):
         """The combined pattern of ``K`` and the node-pair blocks of the candidate list's
         pairs built within ``d + skin`` (not the wider skin a filter rebuild may take), plus
         those of the node groups ``need`` (M, 4) when given, else of the groups the list's
         last pattern took: a pattern missing a block of the pairs in use is rebuilt with
-        them (:meth:`jacobian`), and a list keeps them while it lives."""
-        kp, ki, _ = K.getValuesCSR()
+        them (:meth:`jacobian`), and a list keeps them while it lives. ``kp``, ``ki``: the
+        CSR row pointers and columns of ``K``."""
         c = self.candidates
         if (
             need is None
@@ -933,59 +924,33 @@ class SelfBarrier:
         the pairs in use), collective."""
         t0 = time.perf_counter()
         xa = self.positions(x)
-        _, node, _, hess, _ = self._terms(xa, hessian=True)  # (re)builds the list first
-        m = len(node)
-        lay, own, at = self._slots(K, node)
-        keys, indptr, indices, pos_k, _ = lay
-        _, _, kv = K.getValuesCSR()
-        sel = np.broadcast_to(own[:, :, :, None, None], (m, 4, 3, 4, 3))
-        h = hess.reshape(m, 4, 3, 4, 3)[sel]
-        data = np.empty(len(keys)) if self._C_data is None else self._C_data
-        # K's value, then the pairs' in their order, as np.add.at would (bincount: its fast form)
-        data[:] = np.bincount(
-            np.concatenate([pos_k, at]), weights=np.concatenate([kv, h]), minlength=len(keys)
-        )
+        _, parts, _ = self._terms(xa, hessian=True)  # (re)builds the list first
+        kp, ki, kv = K.getValuesCSR()
+        lay = self._layout(K, kp, ki)
+        data = self._sum(lay, kv, parts)
+        if not self.comm.allreduce(data is not None, op=MPI.LAND):  # a pair outside the list's
+            lay = self._layout(K, kp, ki, need=np.concatenate([q[0] for q in parts]))
+            data = self._sum(lay, kv, parts)
         C = self._C
         if self._C_data is None:
-            C.setValuesCSR(indptr, indices, data)
+            C.setValuesCSR(lay[1], lay[2], data)
         C.assemble()  # also marks the new values
         self.wall += time.perf_counter() - t0
         return C
 
-    def _slots(self, K: PETSc.Mat, node: IntArray) -> tuple[tuple, NDArray[np.bool_], IntArray]:
-        """The combined layout (:meth:`_layout`), which rows of the pairs' node groups
-        ``node`` (M, 4) are this rank's (M, 4, 3) and the positions in the layout's values
-        of those rows' entries (in the order of the pairs' Hessians); kept while the layout
-        and the node groups are (collective)."""
-        lay = self._layout(K)
-        last = self._slotted
-        hit = last is not None and last[0] is lay and np.array_equal(last[1], node)
-        if self.comm.size > 1:
-            hit = self.comm.allreduce(int(not hit)) == 0
-        if hit:
-            return last[0], last[2], last[3]
-        m = len(node)
-        # the key of each 3 x 3 block's row (pair, row node, row component) and first
-        # column (column node): a block's three columns follow each other in the pattern
-        r_node = np.repeat(node, 3, axis=1).reshape(m, 4, 3)
-        own = (r_node >= self.lo) & (r_node < self.lo + self.n)
-        r_loc = (3 * (r_node - self.lo) + np.arange(3)).astype(np.int64)
-        ek = r_loc[:, :, :, None] * lay[4] + self.row0[node][:, None, None, :]  # (M, 4, 3, 4)
-        at, held = self._positions(lay[0], ek[own].ravel())
-        if not self.comm.allreduce(held, op=MPI.LAND):  # a pair outside the near ones
-            lay = self._layout(K, need=node)
-            at, _ = self._positions(lay[0], ek[own].ravel())
-        self._slotted = (lay, node.copy(), own, at)
-        return lay, own, at
-
-    @staticmethod
-    def _positions(keys: NDArray[np.int64], first: NDArray[np.int64]) -> tuple[IntArray, bool]:
-        """Positions (B * 3,) in the sorted pattern ``keys`` of the three columns of the
-        blocks whose first keys are ``first`` (B,), and whether the pattern holds them all."""
-        at = (np.searchsorted(keys, first)[:, None] + np.arange(3)).ravel()
-        want = (first[:, None] + np.arange(3)).ravel()
-        held = bool(np.all(keys[np.minimum(at, len(keys) - 1)] == want))
-        return at, held
+    def _sum(self, lay: tuple, kv: FloatArray, parts: list[tuple]) -> FloatArray | None:
+        """The values of the layout ``lay``: K's values ``kv``, then the rows of this rank's
+        nodes of the pairs' Hessians in their order (:func:`.barrier_kernels.add_blocks`),
+        or None if the layout misses a block of them."""
+        keys, indptr, indices, pos_k, _ = lay
+        data = np.zeros(len(keys)) if self._C_data is None else self._C_data
+        data[:] = 0.0
+        data[pos_k] = kv
+        for node, _, hess in parts:
+            node = np.ascontiguousarray(node, dtype=np.int64)
+            if not bk.add_blocks(hess, node, self.lo, self.n, self.row0, indptr, indices, data):
+                return None
+        return data
 
     # ----------------------------------------------------------------- checkpoint
     def state_arrays(self) -> dict[str, np.ndarray]:
