@@ -726,7 +726,7 @@ class LagrangeContact:
             lam0 = lam
             # the largest admissible fraction of the step (e.g. no self-intersection)
             alpha = 1.0 if self.step_filter is None else self.step_filter(x0, s[: 5 * n])
-            used = alpha
+            used = filtered = alpha
             for _ in range(8):  # backtracking: alpha = 1, 1/2, ..., 1/128
                 used = alpha
                 xv.getArray()[:] = x0 + alpha * s[: 5 * n]
@@ -738,13 +738,16 @@ class LagrangeContact:
             r, gap, terms, fnorm, gmax, bcmax, merit = trial
             prev.append(fnorm)
             log.debug(
-                "newton %d: |r| %.3e N (ref %.3e), max|gap| %.2e m, line search %.4g, %d active",
+                "newton %d: |r| %.3e N (ref %.3e), max|gap| %.2e m, line search %.4g "
+                "(step filter %.4g), %d active, %s sticking (this rank)",
                 its + 1,
                 fnorm,
                 max(prev),
                 gmax,
                 used,
+                filtered,
                 len(nodes),
+                "-" if terms[3] is None else int(terms[3].stick.sum()),
             )
             last_step = used * self.comm.allreduce(
                 float(np.max(np.abs(s[: 3 * n]))) if n else 0.0, op=MPI.MAX
