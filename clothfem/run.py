@@ -81,6 +81,7 @@ RUN_FILES = (
     "history.csv",
     "history_columns.csv",
     "summary.json",
+    "summary.json.tmp",
     "fabric.xdmf",
     "fabric.h5",
     "fabric.xdmf.tmp",
@@ -504,10 +505,15 @@ def _don(scene: Scene, out: Path, comm: MPI.Comm, *, resume: bool) -> _Donned:
 
 
 def _write_summary(out: Path, summary: dict[str, Any], comm: MPI.Comm) -> None:
-    """``out/summary.json`` (rank 0): completed, reason, final angle, steps, wall time..."""
+    """``out/summary.json`` (rank 0): completed, reason, final angle, steps, wall time...
+    Written whole (a temporary file renamed over it) and on disk when any rank returns:
+    collective."""
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
-        (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
+        tmp = out / "summary.json.tmp"
+        tmp.write_text(json.dumps(summary, indent=1, default=float) + "\n")
+        os.replace(tmp, out / "summary.json")
+    comm.barrier()
 
 
 def _started(out: Path, comm: MPI.Comm) -> bool:
