@@ -17,10 +17,11 @@ import time
 REFERENCE = "/usr/lib/x86_64-linux-gnu/blas:/usr/lib/x86_64-linux-gnu/lapack"
 
 
-def child(n_around: int, n_along: int, repeats: int) -> None:
-    import numpy as np
+def sleeve_jacobian(n_around: int, n_along: int):
+    """The sleeve-sized tube (radius 0.06 m, length 0.5 m, Q2 quadrilaterals, cotton,
+    clamped shoulder, gravity) at rest at load factor 1: (model, x, residual f, Jacobian K),
+    supports not yet applied to K."""
     from mpi4py import MPI
-    from petsc4py import PETSc
 
     from clothfem import mesh as meshes
     from clothfem.shell import Clamp, FabricMaterial, Gravity, ShellModel
@@ -39,7 +40,15 @@ def child(n_around: int, n_along: int, repeats: int) -> None:
     x = model.create_vector()
     f = x.duplicate()
     model.residual(x, f)
-    K = model.jacobian(x)
+    return model, x, f, model.jacobian(x)
+
+
+def child(n_around: int, n_along: int, repeats: int) -> None:
+    import numpy as np
+    from mpi4py import MPI
+    from petsc4py import PETSc
+
+    model, x, f, K = sleeve_jacobian(n_around, n_along)
     rows, _ = model.bc_rows_and_values(1.0)
     K.zeroRows(rows + model.v_range[0], diag=1.0)
     times = []

@@ -27,28 +27,12 @@ DT, BETA = 2.5e-3, 0.25
 
 def _matrix(n_around: int, n_along: int):
     """The sleeve's Newmark matrix at rest, with the clamp's rows set to identity."""
-    from mpi4py import MPI
+    from blas import sleeve_jacobian
 
     from clothfem import dynamics as dy
-    from clothfem import mesh as meshes
-    from clothfem.shell import Clamp, FabricMaterial, Gravity, ShellModel
 
-    sm = meshes.cylinder(
-        MPI.COMM_WORLD, radius=0.06, length=0.5, n_around=n_around, n_along=n_along
-    )
-    model = ShellModel(
-        sm,
-        material=FabricMaterial(E1=1.2e6, E2=1.2e6, G12=1e5, rho=436.0),
-        thickness=1e-3,
-        loads=[Gravity()],
-        supports=[Clamp("shoulder")],
-    )
+    model, _, _, K = sleeve_jacobian(n_around, n_along)
     system = dy.ShellSystem(model, rotary_scale=1.0)
-    model.set_load_factor(1.0)
-    x = model.create_vector()
-    f = x.duplicate()
-    model.residual(x, f)
-    K = model.jacobian(x)
     K.axpy(1.0 / (BETA * DT**2), system.mass_matrix())
     rows, _ = model.bc_rows_and_values(1.0)
     K.zeroRows(rows + model.v_range[0], diag=1.0)
