@@ -413,6 +413,9 @@ def _stopped_note(h: dict[str, np.ndarray], summary: dict) -> str:
     """`` (stopped at X deg)`` if summary.json says the run did not complete, else ''."""
     if summary.get("completed", True) is not False:
         return ""
+    if summary.get("running"):
+        a, _ = torque_curve(h)
+        return f" (not finished: {a[-1]:.1f} deg so far)" if a.size else " (not finished)"
     angle = summary.get("final_angle_deg")
     if not isinstance(angle, int | float):
         a, _ = torque_curve(h)
@@ -697,6 +700,33 @@ def _torques_lines(s: dict) -> list[str]:
     return lines + ["", "(N m, after the settling; torques.csv has the rows)"]
 
 
+def _earlier(s: dict) -> list[dict]:
+    """The segments before the last resume of a run (``summary.json``'s ``earlier``)."""
+    e = s.get("earlier")
+    return [x for x in e if isinstance(x, dict)] if isinstance(e, list) else []
+
+
+def _earlier_wall(s: dict) -> float:
+    """The wall time [s] of the segments before the last resume (those with a summary)."""
+    w = [x.get("wall_time") for x in _earlier(s)]
+    return float(sum(v for v in w if isinstance(v, int | float)))
+
+
+def _segments_note(s: dict) -> str:
+    """`` (N segments; ...)`` for a resumed run: how the earlier ones ended."""
+    earlier = _earlier(s)
+    if not earlier:
+        return ""
+    ends = []
+    for e in earlier:
+        a = e.get("final_angle_deg")
+        at = f" at {a:.2f} deg" if isinstance(a, int | float) else ""
+        w = "" if isinstance(e.get("wall_time"), int | float) else ", its wall time not known"
+        ends.append(f"{e.get('reason') or 'ended'}{at}{w}")
+    n = len(earlier) + 1
+    return f" ({n} segments, resumed after: {'; '.join(ends)})"
+
+
 def report_markdown(run_dir: str | Path) -> str:
     """A short Markdown report of a run folder (status, torques at fixed angles, cost)."""
     run_dir = Path(run_dir)
@@ -715,6 +745,8 @@ def report_markdown(run_dir: str | Path) -> str:
 
     if "completed" not in s:
         status = "unknown (no summary.json: still running or killed)"
+    elif s.get("running"):
+        status = "not finished (a resumed run still running or killed; no end recorded)"
     elif s["completed"]:
         status = "completed"
     else:
@@ -745,12 +777,14 @@ def report_markdown(run_dir: str | Path) -> str:
         ("cut-backs", num("cutbacks", np.sum), ".0f", ""),
         ("max penetration", num("max_penetration", np.max), ".3g", " m"),
         ("Newton iterations (total)", num("newton_iterations", np.sum), ".0f", ""),
-        ("wall time", num("wall_time", lambda c: c[-1], "elapsed"), ".1f", " s"),
     )
     lines += [f"- {label}: {v:{spec}}{unit}" for label, v, spec, unit in facts if v is not None]
+    wall = num("wall_time", lambda c: c[-1], "elapsed")
+    wall = wall if wall is None else wall + _earlier_wall(s)
+    if wall is not None:
+        lines.append(f"- wall time: {wall:.1f} s{_segments_note(s)}")
     timers = {k[2:]: float(np.nansum(h[k])) for k in TIMERS if k in h and h[k].dtype.kind == "f"}
     total = sum(timers.values())
-    wall = num("wall_time", lambda c: c[-1], "elapsed")
     if timers and total > 0:
         # of the run's wall time when known (the rest, "other", is what no timer covers: the
         # explicit step itself, the CSV, pictures), else of the timed parts

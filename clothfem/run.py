@@ -516,6 +516,27 @@ def _write_summary(out: Path, summary: dict[str, Any], comm: MPI.Comm) -> None:
     comm.barrier()
 
 
+def _earlier_segments(out: Path, comm: MPI.Comm) -> list[dict[str, Any]]:
+    """The segments of an interrupted run before this resume, from its ``summary.json``
+    (rank 0 reads, all ranks return): the earlier ones it lists, then its own end (reason,
+    final angle, steps, wall time [s]); a segment that wrote no summary is not known."""
+    from .report import read_summary
+
+    earlier: list[dict[str, Any]] = []
+    if comm.rank == 0:
+        s = read_summary(out)
+        if s:
+            earlier = [e for e in s.get("earlier", []) if isinstance(e, dict)]
+            killed = "no end recorded: killed while running" if s.get("running") else None
+            earlier.append(
+                {
+                    "reason": s.get("reason") or killed,
+                    **{k: s.get(k) for k in ("final_angle_deg", "steps", "wall_time")},
+                }
+            )
+    return comm.bcast(earlier, root=0)
+
+
 def _started(out: Path, comm: MPI.Comm) -> bool:
     """Whether the run has written its first results to ``out`` (rank 0 decides)."""
     ok = (out / "history.csv").exists() or (out / "fabric.h5").exists()
@@ -603,6 +624,10 @@ def run_scene(
         summary["built"] = log  # what the run built and left out (e.g. a repeated gait cycle)
         if donned is not None:
             summary["donning"] = donned.summary
+        if resume:  # the earlier stop's summary is replaced at once: no stale status
+            summary["earlier"] = _earlier_segments(out, comm)
+            summary["running"] = True
+            _write_summary(out, summary, comm)
         try:
             if s.integrator == "static":
                 run_contact_scene(
@@ -620,6 +645,7 @@ def run_scene(
             raise
         finally:
             signal.signal(signal.SIGTERM, old)
+            summary.pop("running", None)
             summary["wall_time"] = time.perf_counter() - t0
             if comm.rank == 0 and scene.body:
                 summary["measures"] = _measures(scene, out)

@@ -258,6 +258,28 @@ def test_report_time_shares_of_the_wall_time(tmp_path, capsys):
     assert expected + "io 0.0 %, other 50.0 %" in text
 
 
+def test_report_of_a_resumed_run_still_running(tmp_path, capsys):
+    """A resumed segment writes a summary marked running at its start: the report does not
+    show the earlier stop as the status, takes the final angle and steps from the history
+    and adds the earlier segments' wall times (15 s of this one's rows + 12.5 s + 7 s)."""
+    earlier = [
+        {"reason": "RunStopped: stopped by signal", "final_angle_deg": 20.0, "wall_time": 12.5},
+        {"reason": "no end recorded: killed while running", "final_angle_deg": None},
+        {"reason": "RunStopped: stopped by signal", "final_angle_deg": 30.0, "wall_time": 7.0},
+    ]
+    summary = {"scene": "demo", "completed": False, "running": True, "earlier": earlier}
+    d = _run(tmp_path / "run", summary=summary)
+    assert main(["report", str(d)]) == 0
+    text = capsys.readouterr().out
+    assert "status: not finished (a resumed run still running or killed" in text
+    assert "final angle: 40.00 deg" in text and "steps: 10 (10 rows" in text
+    assert "wall time: 34.5 s (4 segments, resumed after: RunStopped: stopped by signal at " in text
+    assert "20.00 deg; no end recorded: killed while running, its wall time not known; " in text
+    assert R._stopped_note(R.read_history(d / "history.csv"), summary) == (
+        " (not finished: 40.0 deg so far)"
+    )
+
+
 def test_report_without_summary_or_optional_columns(tmp_path, capsys):
     required = ["stage", "time", "angle_deg", "torque_mag", "newton_iterations", "elapsed"]
     d = _run(tmp_path / "bare", columns=required)

@@ -25,6 +25,7 @@ from clothfem import scene_body, simulation
 from clothfem.cli import main
 from clothfem.history import NAMES as HISTORY_NAMES
 from clothfem.history import UNITS_FILE
+from clothfem.report import report_markdown
 from clothfem.run import RUN_FILES, check_output, clear_output, run_scene
 from clothfem.scene import SceneError
 
@@ -309,9 +310,12 @@ def test_resume_bit_for_bit_from_two_checkpoints(tmp_path, sets, picks):
     took 15 Newton iterations instead of 14, so the iteration counts are not compared).
     Measured 2026-12-02 serially and on 2 ranks, also with the code of 617d543; MUMPS
     without value-based permutation and scaling and another OpenBLAS kernel set did not
-    change it. Some state of the process reaches the implicit path's round-off; it is not
-    found yet. The explicit resumes stay bit for bit, also with MITC9 and every material
-    term (decrimping, yarn friction and viscosity, histories at the kernels' points)."""
+    change it. The state of the process that reaches the round-off is UFL 2022.2's order of
+    the factors of a product of Constants, by their repr strings (a global counter compared
+    as digits): a form built later in the process can compile to another kernel
+    (docs/parallel.md). The explicit resumes stay bit for bit in the suite's order, also with
+    MITC9 and every material term (decrimping, yarn friction and viscosity, histories at the
+    kernels' points); run alone, the first case parts at round-off from the first row."""
     base = _shared(tmp_path)
     scene = scenes.load(CI, sets, unset=UNSET_STATIC)
     kept = _run_keeping_checkpoints(scene, base / "reference", picks)
@@ -550,7 +554,9 @@ def _signal_after_lines(proc: subprocess.Popen, path: Path, lines: int, sig: int
 def test_sigkill_leaves_readable_files_and_resume_continues(tmp_path):
     """SIGKILL an explicit run once it has written rows and field steps: history.csv and the
     XDMF/HDF5 series read back (meshio) up to the last written step; `--resume` continues the
-    same series to the end without a duplicated time."""
+    same series to the end without a duplicated time. A resume killed in its turn leaves a
+    summary that says it did not finish (not a stale earlier status); the resume after it
+    lists that segment in `earlier`."""
     out = tmp_path / "killed"
     sets = [a for s in [*EXPLICIT[:-1], "output.checkpoint_every=3"] for a in ("--set", s)]
     proc = subprocess.Popen(
@@ -564,10 +570,25 @@ def test_sigkill_leaves_readable_files_and_resume_continues(tmp_path):
     times, fields = _series(out)
     assert len(times) >= 9 and {"displacement", "contact_pressure"} <= set(fields[-1])
     assert times == sorted(set(times))
+    assert not (out / "summary.json").exists()
+    proc = subprocess.Popen(
+        [*_cli(out, CI, *sets), "--resume"], env=ENV, stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    _signal_after_lines(proc, out / "history.csv", 17, signal.SIGKILL)
+    proc.wait(timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    killed = json.loads((out / "summary.json").read_text())
+    assert killed["running"] is True and killed["completed"] is False
+    assert killed["earlier"] == [] and "wall_time" not in killed
+    assert "status: not finished" in report_markdown(out)
     res = subprocess.run(
         [*_cli(out, CI, *sets), "--resume"], env=ENV, capture_output=True, text=True, timeout=600
     )
     assert res.returncode == 0, res.stderr[-2000:]
+    done = json.loads((out / "summary.json").read_text())
+    assert done["completed"] is True and "running" not in done
+    assert [e["reason"] for e in done["earlier"]] == ["no end recorded: killed while running"]
     rows = _rows(out)
     times, _ = _series(out)
     assert times == sorted(set(times)) and len(times) == len(rows)
