@@ -517,23 +517,29 @@ def _write_summary(out: Path, summary: dict[str, Any], comm: MPI.Comm) -> None:
 
 
 def _earlier_segments(out: Path, comm: MPI.Comm) -> list[dict[str, Any]]:
-    """The segments of an interrupted run before this resume, from its ``summary.json``
-    (rank 0 reads, all ranks return): the earlier ones it lists, then its own end (reason,
-    final angle, steps, wall time [s]); a segment that wrote no summary is not known."""
-    from .report import read_summary
+    """The segments of an interrupted run before this resume (rank 0 reads, all ranks
+    return): those its ``summary.json`` lists, then how the last one ended (reason, final
+    angle, steps, wall time [s]). A segment killed while running (its summary says
+    ``running``, or there is none) ends at the history's last row: its angle and
+    ``elapsed``, read before the resume cuts the history back to the checkpoint."""
+    from .report import ReportError, read_history, read_summary
 
     earlier: list[dict[str, Any]] = []
     if comm.rank == 0:
         s = read_summary(out)
-        if s:
-            earlier = [e for e in s.get("earlier", []) if isinstance(e, dict)]
-            killed = "no end recorded: killed while running" if s.get("running") else None
-            earlier.append(
-                {
-                    "reason": s.get("reason") or killed,
-                    **{k: s.get(k) for k in ("final_angle_deg", "steps", "wall_time")},
-                }
-            )
+        earlier = [e for e in s.get("earlier", []) if isinstance(e, dict)]
+        last = {k: s.get(k) for k in ("final_angle_deg", "steps", "wall_time")}
+        last["reason"] = s.get("reason")
+        if not s or s.get("running"):
+            last["reason"] = "no end recorded: killed while running"
+            try:
+                h = read_history(out / "history.csv")
+            except ReportError:
+                h = {}
+            if "elapsed" in h and h["elapsed"].size:
+                last["final_angle_deg"] = float(h["angle_deg"][-1])
+                last["wall_time"] = float(h["elapsed"][-1])
+        earlier.append(last)
     return comm.bcast(earlier, root=0)
 
 

@@ -555,8 +555,8 @@ def test_sigkill_leaves_readable_files_and_resume_continues(tmp_path):
     """SIGKILL an explicit run once it has written rows and field steps: history.csv and the
     XDMF/HDF5 series read back (meshio) up to the last written step; `--resume` continues the
     same series to the end without a duplicated time. A resume killed in its turn leaves a
-    summary that says it did not finish (not a stale earlier status); the resume after it
-    lists that segment in `earlier`."""
+    summary that says it did not finish (not a stale earlier status) and lists the first
+    segment's end (angle and wall time from the history); the resume after it lists both."""
     out = tmp_path / "killed"
     sets = [a for s in [*EXPLICIT[:-1], "output.checkpoint_every=3"] for a in ("--set", s)]
     proc = subprocess.Popen(
@@ -580,7 +580,11 @@ def test_sigkill_leaves_readable_files_and_resume_continues(tmp_path):
     assert proc.returncode == -signal.SIGKILL
     killed = json.loads((out / "summary.json").read_text())
     assert killed["running"] is True and killed["completed"] is False
-    assert killed["earlier"] == [] and "wall_time" not in killed
+    assert "wall_time" not in killed
+    (first,) = killed["earlier"]  # the first segment, killed: its end from the history
+    assert first["reason"] == "no end recorded: killed while running"
+    assert first["wall_time"] == float(rows[-1]["elapsed"]) > 0
+    assert first["final_angle_deg"] == float(rows[-1]["angle_deg"])
     assert "status: not finished" in report_markdown(out)
     res = subprocess.run(
         [*_cli(out, CI, *sets), "--resume"], env=ENV, capture_output=True, text=True, timeout=600
@@ -588,7 +592,8 @@ def test_sigkill_leaves_readable_files_and_resume_continues(tmp_path):
     assert res.returncode == 0, res.stderr[-2000:]
     done = json.loads((out / "summary.json").read_text())
     assert done["completed"] is True and "running" not in done
-    assert [e["reason"] for e in done["earlier"]] == ["no end recorded: killed while running"]
+    assert [e["reason"] for e in done["earlier"]] == ["no end recorded: killed while running"] * 2
+    assert done["earlier"][0] == first and done["earlier"][1]["wall_time"] > 0
     rows = _rows(out)
     times, _ = _series(out)
     assert times == sorted(set(times)) and len(times) == len(rows)
