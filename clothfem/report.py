@@ -700,21 +700,22 @@ def _torques_lines(s: dict) -> list[str]:
     return lines + ["", "(N m, after the settling; torques.csv has the rows)"]
 
 
-def _earlier(s: dict) -> list[dict]:
-    """The segments before the last resume of a run (``summary.json``'s ``earlier``)."""
+def earlier_segments(s: dict) -> list[dict]:
+    """The segments before the last resume of a run, as its summary ``s`` lists them
+    (``summary.json``'s ``earlier``; entries that are not objects are skipped)."""
     e = s.get("earlier")
     return [x for x in e if isinstance(x, dict)] if isinstance(e, list) else []
 
 
 def _earlier_wall(s: dict) -> float:
-    """The wall time [s] of the segments before the last resume (those with a summary)."""
-    w = [x.get("wall_time") for x in _earlier(s)]
+    """The wall time [s] of the segments before the last resume (those where it is known)."""
+    w = [x.get("wall_time") for x in earlier_segments(s)]
     return float(sum(v for v in w if isinstance(v, int | float)))
 
 
 def _segments_note(s: dict) -> str:
     """`` (N segments; ...)`` for a resumed run: how the earlier ones ended."""
-    earlier = _earlier(s)
+    earlier = earlier_segments(s)
     if not earlier:
         return ""
     ends = []

@@ -522,12 +522,12 @@ def _earlier_segments(out: Path, comm: MPI.Comm) -> list[dict[str, Any]]:
     angle, steps, wall time [s]). A segment killed while running (its summary says
     ``running``, or there is none) ends at the history's last row: its angle and
     ``elapsed``, read before the resume cuts the history back to the checkpoint."""
-    from .report import ReportError, read_history, read_summary
+    from .report import ReportError, earlier_segments, read_history, read_summary
 
     earlier: list[dict[str, Any]] = []
     if comm.rank == 0:
         s = read_summary(out)
-        earlier = [e for e in s.get("earlier", []) if isinstance(e, dict)]
+        earlier = earlier_segments(s)
         last = {k: s.get(k) for k in ("final_angle_deg", "steps", "wall_time")}
         last["reason"] = s.get("reason")
         if not s or s.get("running"):
