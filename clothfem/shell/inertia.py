@@ -35,7 +35,7 @@ def rotary_mass(V, rho, thickness, dx, scale=1.0) -> ufl.Form:
     ``scale`` multiplies it (rotary-inertia scaling for explicit steps; 1 is physical).
     """
     dd, w = ufl.TrialFunction(V), ufl.TestFunction(V)
-    return scale * rho * thickness**3 / 12.0 * ufl.inner(dd, w) * dx
+    return scale * (rho * thickness**3) / 12.0 * ufl.inner(dd, w) * dx
 
 
 def mass_density(rho, thickness, dx) -> ufl.Form:
@@ -45,4 +45,4 @@ def mass_density(rho, thickness, dx) -> ufl.Form:
 
 def director_mass_density(rho, thickness, dx, scale=1.0) -> ufl.Form:
     """Total rotary inertia scale rho t^3/12 int dA [kg m^2] (a functional, for lumping)."""
-    return scale * rho * thickness**3 / 12.0 * dx
+    return scale * (rho * thickness**3) / 12.0 * dx

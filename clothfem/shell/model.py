@@ -469,15 +469,15 @@ class ShellModel:
         for load in self.loads:
             if isinstance(load, Gravity):
                 g = fem.Constant(mesh, np.array(load.acceleration))
-                W_ext += self.lam * self.rho * self.t * ufl.dot(g, u) * dx_f
+                W_ext += self.lam * (self.rho * (self.t * ufl.dot(g, u))) * dx_f
             elif isinstance(load, Pressure):
                 p = fem.Constant(mesh, float(load.value))
                 if load.follower:
                     Fu = ufl.grad(u)
                     a1, a2 = frame[0] + Fu * frame[0], frame[1] + Fu * frame[1]
-                    follower += -self.lam * p * ufl.dot(ufl.cross(a1, a2), v) * dx_f
+                    follower += -self.lam * (p * ufl.dot(ufl.cross(a1, a2), v)) * dx_f
                 else:
-                    W_ext += self.lam * p * ufl.dot(frame[2], u) * dx_f
+                    W_ext += self.lam * (p * ufl.dot(frame[2], u)) * dx_f
             elif isinstance(load, EdgeTraction):
                 tr = fem.Constant(mesh, np.array(load.traction))
                 W_ext += self.lam * ufl.dot(tr, u) * ds(self.surface.boundaries[load.where])
