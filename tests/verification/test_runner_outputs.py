@@ -310,12 +310,10 @@ def test_resume_bit_for_bit_from_two_checkpoints(tmp_path, sets, picks):
     took 15 Newton iterations instead of 14, so the iteration counts are not compared).
     Measured 2026-12-02 serially and on 2 ranks, also with the code of 617d543; MUMPS
     without value-based permutation and scaling and another OpenBLAS kernel set did not
-    change it. The state of the process that reaches the round-off is UFL 2022.2's order of
-    the factors of a product of Constants, by their repr strings (a global counter compared
-    as digits): a form built later in the process can compile to another kernel
-    (docs/parallel.md). The explicit resumes stay bit for bit in the suite's order, also with
-    MITC9 and every material term (decrimping, yarn friction and viscosity, histories at the
-    kernels' points); run alone, the first case parts at round-off from the first row."""
+    change it. The explicit resumes are bit for bit, also with MITC9 and every material
+    term (decrimping, yarn friction and viscosity, histories at the kernels' points), run
+    alone or in the suite's order (the forms' kernels do not depend on the Constants made
+    before them: tests/unit/test_form_determinism.py)."""
     base = _shared(tmp_path)
     scene = scenes.load(CI, sets, unset=UNSET_STATIC)
     kept = _run_keeping_checkpoints(scene, base / "reference", picks)
