@@ -197,6 +197,20 @@ def _axis_rotation(axis: NDArray[np.float64], angle: float) -> NDArray[np.float6
     return Rotation.from_rotvec(angle * axis).as_matrix()
 
 
+def _ramp_root(a: float) -> float:
+    """The x in (0, 1] with x^3 - x^4 / 2 = a, for 0 < a <= 1/2 (the left side rises
+    monotonically from 0 to 1/2 on [0, 1]); bisection to the last bit."""
+    lo, hi = 0.0, 1.0
+    while True:
+        mid = 0.5 * (lo + hi)
+        if mid in (lo, hi):
+            return hi
+        if mid**3 * (1.0 - 0.5 * mid) < a:
+            lo = mid
+        else:
+            hi = mid
+
+
 @dataclass(frozen=True, eq=False, kw_only=True)
 class HingeMotion:
     """Rotation about a fixed joint axis at constant rate, stopping at ``angle_max``.
@@ -209,8 +223,10 @@ class HingeMotion:
     ``t_ramp`` seconds as ``omega (3 x^2 - 2 x^3)``, x = (t - t_start) / t_ramp (continuous
     angular acceleration, 0 at both ends of the ramp), so ``theta = omega t_ramp (x^3 - x^4 / 2)``
     in the ramp and ``omega (t - t_start - t_ramp / 2)`` after it: the angle lags the constant
-    rate by ``omega t_ramp / 2`` and ``angle_max`` is reached ``t_ramp / 2`` later. The stop at
-    ``angle_max`` stays abrupt.
+    rate by ``omega t_ramp / 2`` and ``angle_max`` is reached ``t_ramp / 2`` later. An
+    ``angle_max`` below ``omega t_ramp / 2`` is reached inside the ramp, at the root x of
+    ``omega t_ramp (x^3 - x^4 / 2) = angle_max`` in (0, 1]. The stop at ``angle_max`` stays
+    abrupt.
 
     Attributes
     ----------
@@ -229,8 +245,7 @@ class HingeMotion:
     t_start : float
         Start of the rotation in s.
     t_ramp : float
-        Duration of the smooth start in s (0: the rate jumps to ``omega`` at ``t_start``);
-        ``omega * t_ramp / 2`` must not exceed ``angle_max``.
+        Duration of the smooth start in s (0: the rate jumps to ``omega`` at ``t_start``).
     """
 
     joint: NDArray[np.float64]
@@ -263,16 +278,15 @@ class HingeMotion:
         tr = float(self.t_ramp)
         if not (np.isfinite(tr) and tr >= 0.0):
             raise ValueError(f"HingeMotion t_ramp: must be finite and >= 0 s, got {tr}")
-        if 0.5 * self.omega * tr > self.angle_max:
-            raise ValueError(
-                f"HingeMotion t_ramp: the smooth start turns omega t_ramp / 2 = "
-                f"{0.5 * self.omega * tr:.4g} rad, more than angle_max = {self.angle_max:.4g} rad"
-            )
         object.__setattr__(self, "t_ramp", tr)
 
     @property
     def t_end(self) -> float:
         """Time in s at which ``angle_max`` is reached."""
+        if 0.5 * self.omega * self.t_ramp >= self.angle_max:  # inside the ramp (or at its end)
+            return self.t_start + self.t_ramp * _ramp_root(
+                self.angle_max / (self.omega * self.t_ramp)
+            )
         return self.t_start + self.angle_max / self.omega + 0.5 * self.t_ramp
 
     def angle(self, t: float) -> float:
@@ -282,7 +296,7 @@ class HingeMotion:
         s = min(max(float(t) - self.t_start, 0.0), self.t_end - self.t_start)
         if s < self.t_ramp:
             x = s / self.t_ramp
-            return self.omega * self.t_ramp * x**3 * (1.0 - 0.5 * x)
+            return min(self.omega * self.t_ramp * x**3 * (1.0 - 0.5 * x), self.angle_max)
         return min(self.omega * (s - 0.5 * self.t_ramp), self.angle_max)
 
     def rate(self, t: float) -> float:

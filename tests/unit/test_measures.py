@@ -163,7 +163,8 @@ def test_dissipation_counts_the_friction_between_layers(tmp_path):
 def test_hinge_smooth_start_angle_and_rate():
     """HingeMotion t_ramp: the rate rises as omega (3 x^2 - 2 x^3) over the ramp, the angle
     is its integral (omega t_ramp / 2 behind the constant rate afterwards), angle_max is
-    reached t_ramp / 2 later, and t_ramp = 0 is the constant rate bit for bit."""
+    reached t_ramp / 2 later (or inside the ramp, for a smaller angle_max), and t_ramp = 0 is
+    the constant rate bit for bit."""
     from clothfem.body.motion import HingeMotion
 
     kw = dict(joint=[0.3, 0, 0], axis=[0, -1, 0], centre0=[0.42, 0, 0], rotation0=np.eye(3))
@@ -184,8 +185,16 @@ def test_hinge_smooth_start_angle_and_rate():
     step = HingeMotion(omega=om, angle_max=amax, **kw)
     for x in (0.0, 0.3, 0.7, 5.0):
         assert step.angle(x) == om * min(max(x, 0.0), amax / om)
-    with pytest.raises(ValueError, match="t_ramp"):
-        HingeMotion(omega=om, angle_max=0.01, t_ramp=tr, **kw)
+    # an angle_max inside the ramp: reached where the ramp's angle equals it, then rest
+    short = HingeMotion(omega=om, angle_max=0.01, t_ramp=tr, **kw)
+    x = (short.t_end - 0.0) / tr
+    assert 0.0 < x < 1.0
+    assert om * tr * x**3 * (1.0 - 0.5 * x) == pytest.approx(0.01, rel=1e-15)
+    assert short.angle(short.t_end) == pytest.approx(0.01, rel=1e-15)
+    assert short.angle(short.t_end + 1.0) == 0.01 and short.rate(short.t_end) == 0.0
+    assert short.rate(0.5 * short.t_end) > 0.0
+    at_end = HingeMotion(omega=om, angle_max=om * tr / 2, t_ramp=tr, **kw)
+    assert at_end.t_end == pytest.approx(tr, rel=1e-15)
 
 
 def test_roughness_split_of_a_trend_plus_alternation():
