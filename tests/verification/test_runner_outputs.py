@@ -366,7 +366,7 @@ def test_resume_refuses_another_scene(tmp_path):
 @pytest.mark.slow
 def test_resume_bit_for_bit_with_self_contact(tmp_path):
     """The arm-sleeve scene (16x20) with fabric self-contact to 50 deg, resumed from the
-    checkpoint at 45.6 deg (row 100), from where fabric-fabric pairs are in contact at every
+    checkpoint at 42.8 deg (row 100), from where fabric-fabric pairs are in contact at every
     row: the resumed run builds a fresh candidate list and repeats the history (but the
     timers). How many pairs touch past the slip moves with round-off (the fewest in a row
     was 16 in one process and above 20 in another, with the same code), so the scenario
