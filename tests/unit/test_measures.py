@@ -187,7 +187,7 @@ def test_hinge_smooth_start_angle_and_rate():
         assert step.angle(x) == om * min(max(x, 0.0), amax / om)
     # an angle_max inside the ramp: reached where the ramp's angle equals it, then rest
     short = HingeMotion(omega=om, angle_max=0.01, t_ramp=tr, **kw)
-    x = (short.t_end - 0.0) / tr
+    x = short.t_end / tr  # t_start = 0
     assert 0.0 < x < 1.0
     assert om * tr * x**3 * (1.0 - 0.5 * x) == pytest.approx(0.01, rel=1e-15)
     assert short.angle(short.t_end) == pytest.approx(0.01, rel=1e-15)
