@@ -256,6 +256,7 @@ class HingeMotion:
     rotation0: NDArray[np.float64]
     t_start: float = 0.0
     t_ramp: float = 0.0
+    _t_end: float = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joint", _vec3(self.joint, what="HingeMotion joint"))
@@ -279,15 +280,16 @@ class HingeMotion:
         if not (np.isfinite(tr) and tr >= 0.0):
             raise ValueError(f"HingeMotion t_ramp: must be finite and >= 0 s, got {tr}")
         object.__setattr__(self, "t_ramp", tr)
+        if 0.5 * self.omega * tr >= self.angle_max:  # reached inside the ramp (or at its end)
+            t_end = self.t_start + tr * _ramp_root(self.angle_max / (self.omega * tr))
+        else:
+            t_end = self.t_start + self.angle_max / self.omega + 0.5 * tr
+        object.__setattr__(self, "_t_end", t_end)
 
     @property
     def t_end(self) -> float:
         """Time in s at which ``angle_max`` is reached."""
-        if 0.5 * self.omega * self.t_ramp >= self.angle_max:  # inside the ramp (or at its end)
-            return self.t_start + self.t_ramp * _ramp_root(
-                self.angle_max / (self.omega * self.t_ramp)
-            )
-        return self.t_start + self.angle_max / self.omega + 0.5 * self.t_ramp
+        return self._t_end
 
     def angle(self, t: float) -> float:
         """Hinge angle ``theta(t)`` in rad."""
